@@ -1,0 +1,140 @@
+"""Read STEP, IGES and BREP into an OCCT shape in millimetres, with the unit the file declared."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from OCP.BinTools import BinTools
+from OCP.BRep import BRep_Builder
+from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
+from OCP.BRepTools import BRepTools
+from OCP.IFSelect import IFSelect_RetDone
+from OCP.IGESControl import IGESControl_Reader
+from OCP.Interface import Interface_Static
+from OCP.STEPControl import STEPControl_Reader
+from OCP.TColStd import TColStd_SequenceOfAsciiString
+from OCP.TopAbs import TopAbs_FACE, TopAbs_SHELL, TopAbs_SOLID
+from OCP.TopExp import TopExp
+from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
+from OCP.TopTools import TopTools_IndexedMapOfShape
+
+from .errors import AmprepError, ErrorCode
+from .formats import sniff_path
+
+
+@dataclass(frozen=True, eq=False)
+class CadModel:
+    """A B-rep read from a file, in mm: `faces[i]` is CAD face i, `face_solid[i]` its solid index (-1: none)."""
+
+    shape: TopoDS_Shape
+    format: str
+    units: str  # the length unit the file declared ("none" when it declares none)
+    faces: tuple[TopoDS_Face, ...]
+    face_solid: tuple[int, ...]
+    solids: int
+    sewn: bool = False
+
+
+_UNIT_NAMES = {
+    "millimetre": "mm", "millimeter": "mm", "mm": "mm", "inch": "inch", "in": "inch",
+    "metre": "m", "meter": "m", "m": "m", "centimetre": "cm", "centimeter": "cm", "cm": "cm",
+    "foot": "ft", "ft": "ft", "micrometre": "um", "micron": "um", "um": "um",
+}
+
+
+def _unit_name(raw: str) -> str:
+    return _UNIT_NAMES.get(raw.strip().strip("'.").lower(), raw.strip().lower() or "none")
+
+
+def _read_step(path: Path) -> tuple[TopoDS_Shape, str]:
+    Interface_Static.SetCVal_s("xstep.cascade.unit", "MM")
+    reader = STEPControl_Reader()
+    if reader.ReadFile(str(path)) != IFSelect_RetDone:
+        raise AmprepError(ErrorCode.UNREADABLE_CAD, "the STEP file could not be parsed")
+    lengths, angles, solids = (TColStd_SequenceOfAsciiString() for _ in range(3))
+    reader.FileUnits(lengths, angles, solids)
+    units = _unit_name(lengths.Value(1).ToCString()) if lengths.Length() else "none"
+    reader.TransferRoots()
+    return reader.OneShape(), units
+
+
+def _read_iges(path: Path) -> tuple[TopoDS_Shape, str]:
+    Interface_Static.SetCVal_s("xstep.cascade.unit", "MM")
+    reader = IGESControl_Reader()
+    if reader.ReadFile(str(path)) != IFSelect_RetDone:
+        raise AmprepError(ErrorCode.UNREADABLE_CAD, "the IGES file could not be parsed")
+    units = _unit_name(reader.IGESModel().GlobalSection().UnitName().ToCString())
+    reader.TransferRoots()
+    return reader.OneShape(), units
+
+
+def _read_brep(path: Path) -> tuple[TopoDS_Shape, str]:
+    shape = TopoDS_Shape()
+    with path.open("rb") as fh:
+        binary = fh.read(64).lstrip().startswith(b"Open CASCADE Topology")
+    try:
+        ok = BinTools.Read_s(shape, str(path)) if binary else BRepTools.Read_s(shape, str(path), BRep_Builder())
+    except Exception:  # OCCT raises Standard_Failure subclasses on corrupt input
+        ok = False
+    if not ok:
+        raise AmprepError(ErrorCode.UNREADABLE_CAD, "the BREP file could not be parsed")
+    return shape, "none"
+
+
+def _indexed(shape: TopoDS_Shape, kind: int) -> TopTools_IndexedMapOfShape:
+    m = TopTools_IndexedMapOfShape()
+    TopExp.MapShapes_s(shape, kind, m)
+    return m
+
+
+def _sew(shape: TopoDS_Shape, tolerance: float) -> TopoDS_Shape:
+    """Join loose faces (IGES trimmed surfaces) into shells through shared B-rep edges."""
+    sewing = BRepBuilderAPI_Sewing(tolerance)
+    sewing.Add(shape)
+    sewing.Perform()
+    sewn = sewing.SewedShape()
+    return sewn if not sewn.IsNull() else shape
+
+
+def model_from_shape(shape: TopoDS_Shape, fmt: str = "brep", units: str = "none", sewn: bool = False) -> CadModel:
+    """Index the faces and solids of a shape (faces in TopExp order; an assembly's instances are distinct)."""
+    if shape is None or shape.IsNull():
+        raise AmprepError(ErrorCode.EMPTY_MODEL, "the file holds no shape")
+    faces_map = _indexed(shape, TopAbs_FACE)
+    if faces_map.Extent() == 0:
+        raise AmprepError(ErrorCode.EMPTY_MODEL, "the file holds no faces")
+    solids_map = _indexed(shape, TopAbs_SOLID)
+    face_solid = [-1] * faces_map.Extent()
+    for s in range(1, solids_map.Extent() + 1):
+        for f in _iter_map(_indexed(solids_map.FindKey(s), TopAbs_FACE)):
+            i = faces_map.FindIndex(f)
+            if i > 0 and face_solid[i - 1] < 0:
+                face_solid[i - 1] = s - 1
+    faces = tuple(TopoDS.Face_s(faces_map.FindKey(i)) for i in range(1, faces_map.Extent() + 1))
+    return CadModel(shape, fmt, units, faces, tuple(face_solid), solids_map.Extent(), sewn)
+
+
+def _iter_map(m: TopTools_IndexedMapOfShape):  # type: ignore[no-untyped-def]
+    return (m.FindKey(i) for i in range(1, m.Extent() + 1))
+
+
+def read_cad(path: str | Path, fmt: str | None = None) -> CadModel:
+    """Read a STEP, IGES or BREP file into a CadModel in mm; loose faces (no shell) are sewn into shells."""
+    p = Path(path)
+    fmt = fmt or sniff_path(p)
+    readers = {"step": _read_step, "iges": _read_iges, "brep": _read_brep}
+    if fmt not in readers:
+        raise AmprepError(ErrorCode.UNSUPPORTED_FORMAT, f"{fmt} is not a CAD format")
+    try:
+        shape, units = readers[fmt](p)
+    except AmprepError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - OCCT failures surface as assorted exception types
+        raise AmprepError(ErrorCode.UNREADABLE_CAD, f"OCCT could not read the {fmt.upper()} file ({type(exc).__name__})") from None
+    if shape.IsNull():
+        raise AmprepError(ErrorCode.EMPTY_MODEL, f"the {fmt.upper()} file holds no shape OCCT can transfer")
+    sewn = False
+    if _indexed(shape, TopAbs_SHELL).Extent() == 0 and _indexed(shape, TopAbs_FACE).Extent() > 1:
+        shape, sewn = _sew(shape, 1e-3), True
+    return model_from_shape(shape, fmt, units, sewn)

@@ -1,0 +1,130 @@
+"""Mesh validity from edge incidence: boundary, non-manifold and misoriented edges, degenerates, shells."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .mesh import Mesh
+
+
+@dataclass(frozen=True)
+class EdgeIncidence:
+    """Undirected edges with their use: edges (e, 2) int64 sorted pairs, count (e,) triangles per edge,
+    forward (e,) how many uses run low→high index, edge_of (m, 3) edge index of each triangle side."""
+
+    edges: np.ndarray
+    count: np.ndarray
+    forward: np.ndarray
+    edge_of: np.ndarray
+
+
+def edge_incidence(triangles: np.ndarray) -> EdgeIncidence:
+    """Undirected edge table of (m, 3) triangles; side k of a triangle joins corners k and k+1."""
+    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
+    lo = directed.min(axis=1)
+    hi = directed.max(axis=1)
+    key = lo * (int(triangles.max(initial=0)) + 1) + hi
+    uniq, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+    forward = np.bincount(inverse, weights=(directed[:, 0] < directed[:, 1]), minlength=len(uniq))
+    first = np.zeros(len(uniq), np.int64)
+    first[inverse[::-1]] = np.arange(len(key))[::-1]
+    edges = np.stack([lo[first], hi[first]], axis=1)
+    return EdgeIncidence(edges, count, forward.astype(np.int64), inverse.reshape(-1, 3))
+
+
+def triangle_areas(corners: np.ndarray) -> np.ndarray:
+    """(m,) area = |(b − a) × (c − a)| / 2 of (m, 3, 3) corners."""
+    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+
+
+def signed_volume(corners: np.ndarray) -> float:
+    """V = Σ a · (b × c) / 6 over (m, 3, 3) corners (positive for a closed, outward-oriented mesh)."""
+    return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
+
+
+@dataclass(frozen=True)
+class MeshChecks:
+    """Counts from our own edge checks; `closed` = no boundary, non-manifold or misoriented edge."""
+
+    triangles: int
+    vertices: int
+    boundary_edges: int
+    nonmanifold_edges: int
+    misoriented_edges: int
+    degenerate_triangles: int
+    duplicate_triangles: int
+    shells: int
+    volume: float
+    area: float
+
+    @property
+    def closed(self) -> bool:
+        return self.boundary_edges == 0 and self.nonmanifold_edges == 0 and self.misoriented_edges == 0
+
+
+def degenerate_mask(mesh: Mesh, rel_eps: float = 1e-12) -> np.ndarray:
+    """(m,) bool: a repeated corner index, or area ≤ rel_eps · (bbox diagonal)²."""
+    t = mesh.triangles
+    repeated = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
+    lo, hi = mesh.bbox()
+    scale = float(np.linalg.norm(hi - lo)) or 1.0
+    return repeated | (triangle_areas(mesh.corners) <= rel_eps * scale * scale)
+
+
+def shell_labels(mesh: Mesh) -> tuple[int, np.ndarray]:
+    """(number of shells, (m,) label per triangle): triangles joined through shared edges."""
+    m = mesh.n_triangles
+    if m == 0:
+        return 0, np.zeros(0, np.int64)
+    inc = edge_incidence(mesh.triangles)
+    tri = np.repeat(np.arange(m), 3)
+    edge = inc.edge_of.reshape(-1)
+    graph = coo_matrix((np.ones(len(tri)), (tri, edge + m)), shape=(m + len(inc.edges),) * 2)
+    n, labels = connected_components(graph, directed=False)
+    labels = labels[:m]
+    _, labels = np.unique(labels, return_inverse=True)
+    return int(labels.max()) + 1, labels
+
+
+def check_mesh(mesh: Mesh) -> MeshChecks:
+    """Edge-incidence checks of a mesh (an edge is identified by its two vertex indices, never by distance)."""
+    if mesh.n_triangles == 0:
+        return MeshChecks(0, mesh.n_vertices, 0, 0, 0, 0, 0, 0, 0.0, 0.0)
+    inc = edge_incidence(mesh.triangles)
+    boundary = int((inc.count == 1).sum())
+    nonmanifold = int((inc.count > 2).sum())
+    misoriented = int(((inc.count == 2) & (inc.forward != 1)).sum())
+    srt = np.sort(mesh.triangles, axis=1)
+    duplicates = len(srt) - len(np.unique(srt, axis=0))
+    corners = mesh.corners
+    shells, _ = shell_labels(mesh)
+    return MeshChecks(
+        triangles=mesh.n_triangles,
+        vertices=int(len(np.unique(mesh.triangles))),
+        boundary_edges=boundary,
+        nonmanifold_edges=nonmanifold,
+        misoriented_edges=misoriented,
+        degenerate_triangles=int(degenerate_mask(mesh).sum()),
+        duplicate_triangles=int(duplicates),
+        shells=shells,
+        volume=signed_volume(corners),
+        area=float(triangle_areas(corners).sum()),
+    )
+
+
+def manifold3d_accepts(mesh: Mesh) -> bool:
+    """True when manifold3d builds a valid Manifold from the mesh (its own 2-manifold, oriented check)."""
+    import manifold3d
+
+    if mesh.n_triangles == 0:
+        return False
+    m = manifold3d.Mesh(
+        vert_properties=np.ascontiguousarray(mesh.vertices, dtype=np.float32),
+        tri_verts=np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
+    )
+    man = manifold3d.Manifold(m)
+    return man.status() == manifold3d.Error.NoError

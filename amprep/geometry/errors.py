@@ -1,0 +1,30 @@
+"""Errors with a stable code: the library raises AmprepError, every edge maps its code once."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class ErrorCode(StrEnum):
+    """Stable, machine-readable error codes (part of the public API: never renamed)."""
+
+    UNSUPPORTED_FORMAT = "unsupported_format"
+    UNREADABLE_CAD = "unreadable_cad"
+    UNREADABLE_MESH = "unreadable_mesh"
+    EMPTY_MODEL = "empty_model"
+    INVALID_PARAMETER = "invalid_parameter"
+    MESHING_FAILED = "meshing_failed"
+    WRITE_FAILED = "write_failed"
+    CANCELLED = "cancelled"
+
+
+class AmprepError(Exception):
+    """An error the user can act on: `code` is stable, `message` is one line for a person."""
+
+    def __init__(self, code: ErrorCode, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+    def __str__(self) -> str:
+        return f"{self.code.value}: {self.message}"

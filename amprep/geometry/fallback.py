@@ -1,0 +1,202 @@
+"""Mesh one face ourselves: constrained Delaunay in its (u,v) domain from the shared edge discretisation,
+refined until the chord tolerance holds (the approach of seed paper 000)."""
+
+from __future__ import annotations
+
+import numpy as np
+import triangle as tr
+from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve
+from OCP.BRepTools import BRepTools_WireExplorer
+from OCP.GCPnts import GCPnts_TangentialDeflection
+from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
+from OCP.TopExp import TopExp_Explorer
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
+
+from .chordal import triangle_chordal_error
+from .errors import AmprepError, ErrorCode
+from .surfaces import Surface
+from .tessellate import FacePatch, Topology
+
+MAX_ROUNDS = 40
+
+
+def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
+    """(n,) sorted parameters of an edge with no mesh yet, at the chord tolerance and angle (OCCT's GCPnts)."""
+    first, last = BRep_Tool.Range_s(edge)
+    if BRep_Tool.Degenerated_s(edge):
+        return np.linspace(first, last, 9)
+    curve = BRepAdaptor_Curve(edge)
+    disc = GCPnts_TangentialDeflection(curve, angular, tolerance, 3)
+    params = np.array([disc.Parameter(i) for i in range(1, disc.NbPoints() + 1)])
+    params = np.unique(np.clip(np.concatenate([[first, last], params]), first, last))
+    return params
+
+
+def edge_sagitta(edge: TopoDS_Edge, params: np.ndarray) -> np.ndarray:
+    """(n−1,) max distance from the edge curve at 1/4, 1/2, 3/4 of each parameter segment to its chord."""
+    curve = BRepAdaptor_Curve(edge)
+    pts = np.array([curve.Value(t).Coord() for t in params])
+    fr = np.array([0.25, 0.5, 0.75])
+    mids = params[:-1, None] + fr[None, :] * np.diff(params)[:, None]
+    mid_pts = np.array([curve.Value(t).Coord() for t in mids.ravel()]).reshape(-1, 3, 3)
+    a, b = pts[:-1, None], pts[1:, None]
+    ab = b - a
+    len2 = np.maximum((ab * ab).sum(-1), 1e-300)
+    s = np.clip(((mid_pts - a) * ab).sum(-1) / len2, 0, 1)
+    return np.linalg.norm(mid_pts - (a + s[..., None] * ab), axis=-1).max(axis=1)
+
+
+def split_edge_to_tolerance(edge: TopoDS_Edge, params: np.ndarray, tolerance: float, rounds: int = 12) -> np.ndarray:
+    """Edge parameters with every segment whose sagitta exceeds the tolerance halved, until none does."""
+    if BRep_Tool.Degenerated_s(edge):
+        return params
+    for _ in range(rounds):
+        bad = edge_sagitta(edge, params) > tolerance
+        if not bad.any():
+            break
+        params = np.sort(np.concatenate([params, 0.5 * (params[:-1][bad] + params[1:][bad])]))
+    return params
+
+
+def _wires(face: TopoDS_Face) -> list:  # type: ignore[type-arg]
+    out = []
+    exp = TopExp_Explorer(face, TopAbs_WIRE)
+    while exp.More():
+        out.append(TopoDS.Wire_s(exp.Current()))
+        exp.Next()
+    return out
+
+
+def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
+    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,)."""
+    loops = []
+    for wire in _wires(face):
+        uvs, verts, edges, pars = [], [], [], []
+        wexp = BRepTools_WireExplorer(wire, face)
+        while wexp.More():
+            edge = TopoDS.Edge_s(wexp.Current())
+            ei = topo.edge_index(edge)
+            degenerate = BRep_Tool.Degenerated_s(edge)
+            if ei not in topo.edge_params:
+                topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
+            params = topo.edge_params[ei]
+            if edge.Orientation() == TopAbs_REVERSED:
+                params = params[::-1]
+            pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+            if pcurve is None:
+                raise AmprepError(ErrorCode.MESHING_FAILED, "an edge of face has no curve on its surface")
+            v1, p1, v2, p2 = topo.edge_ends(edge)
+            n = len(params) - 1  # the last point starts the next edge
+            for t in params[:n]:
+                uvs.append(pcurve.Value(t).Coord())
+            vtx = np.full(n, -1, np.int64)
+            vtx[0] = v1 if abs(params[0] - p1) <= abs(params[0] - p2) else v2
+            if degenerate:
+                vtx[:] = vtx[0]
+            verts.append(vtx)
+            edges.append(np.where(vtx >= 0, -1, ei))
+            pars.append(np.where(vtx >= 0, np.nan, params[:n]))
+            wexp.Next()
+        if uvs:
+            loops.append(dict(uv=np.array(uvs, float), vertex=np.concatenate(verts),
+                              edge=np.concatenate(edges), param=np.concatenate(pars)))
+    return loops
+
+
+def _metric_scale(surface: Surface, uv: np.ndarray) -> np.ndarray:
+    """(2,) mean |∂S/∂u|, |∂S/∂v| over the boundary points, so that CDT in scaled (u,v) sees near-true lengths."""
+    h = 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-9)
+    sample = uv[:: max(1, len(uv) // 64)]
+    p = surface.evaluate(sample)
+    du = np.linalg.norm(surface.evaluate(sample + [h, 0]) - p, axis=1) / h
+    dv = np.linalg.norm(surface.evaluate(sample + [0, h]) - p, axis=1) / h
+    s = np.array([du.mean(), dv.mean()])
+    return np.where(s > 1e-12, s, 1.0)
+
+
+def _cdt(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None) -> np.ndarray:
+    data = dict(vertices=pts, segments=segments)
+    if holes is not None and len(holes):
+        data["holes"] = holes
+    out = tr.triangulate(data, "pYQ")
+    if len(out.get("vertices", [])) != len(pts):
+        raise AmprepError(ErrorCode.MESHING_FAILED, "the face's boundary in (u,v) self-intersects")
+    return out.get("triangles", np.zeros((0, 3), np.int64)).astype(np.int64)
+
+
+def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
+    """(N,) bool even-odd point-in-polygon over all loops (closed polygons (n, 2))."""
+    inside = np.zeros(len(points), bool)
+    x, y = points[:, 0:1], points[:, 1:2]
+    for poly in loops:
+        a, b = poly, np.roll(poly, -1, axis=0)
+        cond = (a[None, :, 1] > y) != (b[None, :, 1] > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xint = a[None, :, 0] + (y - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
+        inside ^= (cond & (x < xint)).sum(axis=1) % 2 == 1
+    return inside
+
+
+def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
+              angular: float, order: int = 6) -> FacePatch:
+    """A FacePatch for one face: CDT of its boundary loops in scaled (u,v), points inserted (longest inner edge
+    midpoint, else centroid) in every triangle whose chordal error exceeds the tolerance, until none does."""
+    loops = boundary_loops(face, topo, tolerance, angular)
+    if not loops:
+        raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
+    b_uv = np.concatenate([lp["uv"] for lp in loops])
+    nb = len(b_uv)
+    scale = _metric_scale(surface, b_uv)
+    seg, start = [], 0
+    for lp in loops:
+        n = len(lp["uv"])
+        idx = np.arange(start, start + n)
+        seg.append(np.stack([idx, np.roll(idx, -1)], axis=1))
+        start += n
+    segments = np.concatenate(seg)
+    scaled_loops = [lp["uv"] * scale for lp in loops]
+    pts = b_uv * scale
+    tris = _cdt(pts, segments, None)
+    cent = pts[tris].mean(axis=1)
+    holes = cent[~_inside(cent, scaled_loops)]
+    tris = _cdt(pts, segments, holes)
+    for _ in range(MAX_ROUNDS):
+        uv = pts / scale
+        xyz = surface.evaluate(uv)
+        err = triangle_chordal_error(xyz[tris], uv[tris], surface.evaluate, order)
+        bad = err > tolerance
+        if not bad.any():
+            break
+        seg_code = np.sort(segments.min(axis=1) * (len(pts) + 1) + segments.max(axis=1))
+        new = _insertion_points(pts, tris[bad], seg_code, len(pts) + 1)
+        pts = np.concatenate([pts, new])
+        tris = _cdt(pts, segments, holes)
+    uv = pts / scale
+    xyz = surface.evaluate(uv)
+    k = len(pts)
+    if face.Orientation() == TopAbs_REVERSED:
+        tris = tris[:, [0, 2, 1]]
+    # CDT triangles are counter-clockwise in (u,v): outward when the surface normal S_u × S_v points out
+    node_vertex = np.full(k, -1, np.int64)
+    node_edge = np.full(k, -1, np.int64)
+    node_param = np.full(k, np.nan)
+    node_vertex[:nb] = np.concatenate([lp["vertex"] for lp in loops])
+    node_edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
+    node_param[:nb] = np.concatenate([lp["param"] for lp in loops])
+    return FacePatch(face_id, xyz, uv, tris, node_vertex, node_edge, node_param, meshed_by="fallback")
+
+
+def _insertion_points(pts: np.ndarray, bad: np.ndarray, seg_code: np.ndarray, base: int) -> np.ndarray:
+    """(k, 2) one new point per bad triangle (k, 3): midpoint of its longest edge that is not a boundary
+    segment, else its centroid; seg_code: codes lo·base + hi of the boundary segments."""
+    a, b = bad, np.roll(bad, -1, axis=1)
+    code = np.minimum(a, b) * base + np.maximum(a, b)
+    length = np.linalg.norm(pts[a] - pts[b], axis=2)
+    length[np.isin(code, seg_code)] = -1.0
+    k = length.argmax(axis=1)
+    rows = np.arange(len(bad))
+    mid = 0.5 * (pts[a[rows, k]] + pts[b[rows, k]])
+    centroid = pts[bad].mean(axis=1)
+    out = np.where((length[rows, k] > 0)[:, None], mid, centroid)
+    return np.unique(out, axis=0)

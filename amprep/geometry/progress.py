@@ -1,0 +1,34 @@
+"""Progress and cancellation callbacks shared by long geometry functions."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from .errors import AmprepError, ErrorCode
+
+#: progress(stage, fraction in [0, 1]); may raise to cancel.
+ProgressFn = Callable[[str, float], None]
+
+
+class Progress:
+    """Maps sub-steps onto an overall fraction: `span(start, end)` scales a child's 0..1 into start..end."""
+
+    def __init__(self, fn: ProgressFn | None = None, start: float = 0.0, end: float = 1.0) -> None:
+        self._fn = fn
+        self._start = start
+        self._end = end
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if self._fn is not None:
+            f = min(max(fraction, 0.0), 1.0)
+            self._fn(stage, self._start + (self._end - self._start) * f)
+
+    def span(self, start: float, end: float) -> Progress:
+        """A child whose 0..1 maps to start..end of this one's range."""
+        width = self._end - self._start
+        return Progress(self._fn, self._start + width * start, self._start + width * end)
+
+
+def cancelled() -> AmprepError:
+    """The error raised when a progress callback asks to stop."""
+    return AmprepError(ErrorCode.CANCELLED, "the job was cancelled")

@@ -1,0 +1,160 @@
+"""Exact evaluation S(u,v) of a face's surface, vectorised: closed forms and rational B-splines in numpy."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from OCP.BRepAdaptor import BRepAdaptor_Surface
+from OCP.GeomAbs import (
+    GeomAbs_BezierSurface,
+    GeomAbs_BSplineSurface,
+    GeomAbs_Cone,
+    GeomAbs_Cylinder,
+    GeomAbs_OffsetSurface,
+    GeomAbs_Plane,
+    GeomAbs_Sphere,
+    GeomAbs_SurfaceOfExtrusion,
+    GeomAbs_SurfaceOfRevolution,
+    GeomAbs_Torus,
+)
+from OCP.GeomConvert import GeomConvert
+from OCP.TopoDS import TopoDS_Face
+
+from .bspline import eval_surface
+
+SURFACE_TYPES = {
+    GeomAbs_Plane: "plane", GeomAbs_Cylinder: "cylinder", GeomAbs_Cone: "cone", GeomAbs_Sphere: "sphere",
+    GeomAbs_Torus: "torus", GeomAbs_BSplineSurface: "bspline", GeomAbs_BezierSurface: "bezier",
+    GeomAbs_SurfaceOfRevolution: "revolution", GeomAbs_SurfaceOfExtrusion: "extrusion",
+    GeomAbs_OffsetSurface: "offset",
+}
+
+
+def _vec(p) -> np.ndarray:  # type: ignore[no-untyped-def]
+    return np.array([p.X(), p.Y(), p.Z()])
+
+
+def _frame(ax3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+    return _vec(ax3.Location()), _vec(ax3.XDirection()), _vec(ax3.YDirection()), _vec(ax3.Direction())
+
+
+@dataclass(frozen=True, eq=False)
+class Surface:
+    """A face's surface in world coordinates (mm); `evaluate(uv (N, 2)) -> (N, 3)`; `exact_numpy` False
+    where it falls back to OCCT's point-by-point evaluator."""
+
+    surface_type: str
+    evaluate: Callable[[np.ndarray], np.ndarray]
+    exact_numpy: bool = True
+    data: dict | None = None
+
+
+def plane(o: np.ndarray, x: np.ndarray, y: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """S(u,v) = O + u·X + v·Y."""
+    return lambda uv: o + uv[:, :1] * x + uv[:, 1:2] * y
+
+
+def cylinder(o: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray, r: float) -> Callable[[np.ndarray], np.ndarray]:
+    """S(u,v) = O + r(cos u·X + sin u·Y) + v·Z."""
+    return lambda uv: o + r * (np.cos(uv[:, :1]) * x + np.sin(uv[:, :1]) * y) + uv[:, 1:2] * z
+
+
+def cone(o: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray, r: float, a: float) -> Callable[[np.ndarray], np.ndarray]:
+    """S(u,v) = O + (R + v sin α)(cos u·X + sin u·Y) + v cos α·Z."""
+    def f(uv: np.ndarray) -> np.ndarray:
+        rad = r + uv[:, 1:2] * np.sin(a)
+        return o + rad * (np.cos(uv[:, :1]) * x + np.sin(uv[:, :1]) * y) + uv[:, 1:2] * np.cos(a) * z
+    return f
+
+
+def sphere(o: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray, r: float) -> Callable[[np.ndarray], np.ndarray]:
+    """S(u,v) = O + r cos v (cos u·X + sin u·Y) + r sin v·Z."""
+    def f(uv: np.ndarray) -> np.ndarray:
+        cv = np.cos(uv[:, 1:2])
+        return o + r * cv * (np.cos(uv[:, :1]) * x + np.sin(uv[:, :1]) * y) + r * np.sin(uv[:, 1:2]) * z
+    return f
+
+
+def torus(o: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray, big: float, small: float) -> Callable[[np.ndarray], np.ndarray]:
+    """S(u,v) = O + (R + r cos v)(cos u·X + sin u·Y) + r sin v·Z."""
+    def f(uv: np.ndarray) -> np.ndarray:
+        rad = big + small * np.cos(uv[:, 1:2])
+        return o + rad * (np.cos(uv[:, :1]) * x + np.sin(uv[:, :1]) * y) + small * np.sin(uv[:, 1:2]) * z
+    return f
+
+
+def _array1(arr) -> np.ndarray:  # type: ignore[no-untyped-def]
+    return np.array([arr.Value(i) for i in range(arr.Lower(), arr.Upper() + 1)], dtype=float)
+
+
+def bspline_data(surf) -> dict:  # type: ignore[no-untyped-def]
+    """Poles (nu, nv, 3), weights (nu, nv), flat knots and degrees of a Geom_BSplineSurface (made non-periodic);
+    `uperiod`/`vperiod` = (first, last) of a periodic direction, into which parameters are wrapped."""
+    u1, u2, v1, v2 = surf.Bounds()
+    uperiod = (u1, u2) if surf.IsUPeriodic() else None
+    vperiod = (v1, v2) if surf.IsVPeriodic() else None
+    if surf.IsUPeriodic() or surf.IsVPeriodic():
+        surf = surf.Copy()
+        if surf.IsUPeriodic():
+            surf.SetUNotPeriodic()
+        if surf.IsVPeriodic():
+            surf.SetVNotPeriodic()
+    nu, nv = surf.NbUPoles(), surf.NbVPoles()
+    poles = np.array([[_vec(surf.Pole(i, j)) for j in range(1, nv + 1)] for i in range(1, nu + 1)])
+    if surf.IsURational() or surf.IsVRational():
+        weights = np.array([[surf.Weight(i, j) for j in range(1, nv + 1)] for i in range(1, nu + 1)])
+    else:  # OCCT keeps no weight array for a polynomial surface (its copy may report 0)
+        weights = np.ones((nu, nv))
+    return dict(
+        poles=poles.reshape(nu, nv, 3), weights=weights.reshape(nu, nv),
+        uknots=_array1(surf.UKnotSequence()), vknots=_array1(surf.VKnotSequence()),
+        udeg=surf.UDegree(), vdeg=surf.VDegree(), uperiod=uperiod, vperiod=vperiod,
+    )
+
+
+def wrap_periodic(uv: np.ndarray, uperiod: tuple[float, float] | None, vperiod: tuple[float, float] | None) -> np.ndarray:
+    """(N, 2) parameters with each periodic one moved into its base period: t ← a + (t − a) mod (b − a)."""
+    if uperiod is None and vperiod is None:
+        return uv
+    out = np.array(uv, dtype=float)
+    for k, per in ((0, uperiod), (1, vperiod)):
+        if per is not None:
+            a, b = per
+            out[:, k] = a + np.mod(out[:, k] - a, b - a)
+    return out
+
+
+def _occt_loop(adaptor: BRepAdaptor_Surface) -> Callable[[np.ndarray], np.ndarray]:
+    def f(uv: np.ndarray) -> np.ndarray:
+        return np.array([adaptor.Value(u, v).Coord() for u, v in uv], dtype=float).reshape(-1, 3)
+    return f
+
+
+def surface_of(face: TopoDS_Face) -> Surface:
+    """The exact surface of a face, located in world coordinates, with a vectorised evaluator."""
+    ad = BRepAdaptor_Surface(face, True)
+    kind = ad.GetType()
+    name = SURFACE_TYPES.get(kind, "other")
+    if kind == GeomAbs_Plane:
+        o, x, y, _ = _frame(ad.Plane().Position())
+        return Surface(name, plane(o, x, y))
+    if kind == GeomAbs_Cylinder:
+        c = ad.Cylinder()
+        return Surface(name, cylinder(*_frame(c.Position()), c.Radius()), data=dict(radius=c.Radius()))
+    if kind == GeomAbs_Cone:
+        c = ad.Cone()
+        return Surface(name, cone(*_frame(c.Position()), c.RefRadius(), c.SemiAngle()))
+    if kind == GeomAbs_Sphere:
+        s = ad.Sphere()
+        return Surface(name, sphere(*_frame(s.Position()), s.Radius()))
+    if kind == GeomAbs_Torus:
+        t = ad.Torus()
+        return Surface(name, torus(*_frame(t.Position()), t.MajorRadius(), t.MinorRadius()))
+    if kind in (GeomAbs_BSplineSurface, GeomAbs_BezierSurface):
+        geom = ad.BSpline() if kind == GeomAbs_BSplineSurface else GeomConvert.SurfaceToBSplineSurface_s(ad.Bezier())
+        d = bspline_data(geom)
+        return Surface(name, lambda uv: eval_surface(d["poles"], d["weights"], d["uknots"], d["vknots"], d["udeg"],
+                                                     d["vdeg"], wrap_periodic(uv, d["uperiod"], d["vperiod"])), data=d)
+    return Surface(name, _occt_loop(ad), exact_numpy=False)

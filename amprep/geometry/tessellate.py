@@ -1,0 +1,233 @@
+"""Tessellate a B-rep with OCCT's BRepMesh and weld the face meshes through the B-rep topology.
+
+Each face's triangulation is read in bulk; the nodes on a B-rep edge are identified through the edge's
+polygon on that face's triangulation (edge index, edge parameter), the nodes on a B-rep vertex through the
+vertex, so adjacent faces share vertices by topology, never by distance. Faces OCCT leaves unmeshed, or
+meshed inconsistently with their edges, are meshed again from the shared edge discretisation (fallback.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from OCP.BRep import BRep_Tool
+from OCP.BRepMesh import BRepMesh_IncrementalMesh
+from OCP.BRepTools import BRepTools
+from OCP.IMeshTools import (
+    IMeshTools_MeshAlgoType_Delabella,
+    IMeshTools_MeshAlgoType_Watson,
+    IMeshTools_Parameters,
+)
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
+from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopLoc import TopLoc_Location
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
+from OCP.TopTools import TopTools_IndexedMapOfShape
+
+from .errors import AmprepError, ErrorCode
+
+
+@dataclass(frozen=True)
+class MeshParams:
+    """Meshing parameters: `tolerance` mm (absolute chord deviation) or `relative` (fraction of the bounding-box
+    diagonal, overrides tolerance), `angular` rad, `min_size` mm, `algorithm` delabella | watson."""
+
+    tolerance: float = 0.1
+    relative: float | None = None
+    angular: float = 0.5
+    min_size: float = 0.0
+    algorithm: str = "delabella"
+    parallel: bool = True
+    enforce_tolerance: bool = True
+    force_fallback: bool = False
+    sample_order: int = 6
+
+    def validate(self) -> None:
+        """Raise invalid_parameter for values no mesher can honour."""
+        bad = None
+        if not (self.tolerance > 0 and np.isfinite(self.tolerance)):
+            bad = f"tolerance must be a positive number of mm, got {self.tolerance}"
+        elif self.relative is not None and not (0 < self.relative < 1):
+            bad = f"relative tolerance must be a fraction in (0, 1), got {self.relative}"
+        elif not (0 < self.angular <= np.pi / 2):
+            bad = f"angular deflection must be in (0, π/2] rad, got {self.angular}"
+        elif self.min_size < 0:
+            bad = f"min size must be ≥ 0, got {self.min_size}"
+        elif self.algorithm not in ("delabella", "watson"):
+            bad = f"algorithm must be delabella or watson, got {self.algorithm}"
+        elif not (1 <= self.sample_order <= 20):
+            bad = f"sample order must be 1..20, got {self.sample_order}"
+        if bad:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, bad)
+
+
+def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams) -> None:
+    """Clear any earlier triangulation (a stale one is silently reused otherwise), then BRepMesh the shape."""
+    BRepTools.Clean_s(shape)
+    p = IMeshTools_Parameters()
+    p.Deflection = tolerance
+    p.Angle = params.angular
+    p.Relative = False
+    p.InParallel = params.parallel
+    p.MinSize = params.min_size if params.min_size > 0 else max(tolerance * 0.1, 1e-7)
+    p.MeshAlgo = IMeshTools_MeshAlgoType_Delabella if params.algorithm == "delabella" else IMeshTools_MeshAlgoType_Watson
+    BRepMesh_IncrementalMesh(shape, p)
+
+
+def trsf_matrix(loc: TopLoc_Location) -> np.ndarray | None:
+    """(3, 4) affine matrix of a location, or None for the identity."""
+    if loc.IsIdentity():
+        return None
+    t = loc.Transformation()
+    return np.array([[t.Value(r, c) for c in range(1, 5)] for r in range(1, 4)])
+
+
+def apply_trsf(m: np.ndarray | None, pts: np.ndarray) -> np.ndarray:
+    """(N, 3) points moved by a (3, 4) affine matrix (None: unchanged)."""
+    return pts if m is None else pts @ m[:, :3].T + m[:, 3]
+
+
+def triangulation_arrays(tri) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:  # type: ignore[no-untyped-def]
+    """nodes (k, 3), uv (k, 2) or None, triangles (t, 3) 0-based, of one Poly_Triangulation (local frame)."""
+    k, t = tri.NbNodes(), tri.NbTriangles()
+    nodes = np.array([tri.Node(i).Coord() for i in range(1, k + 1)], dtype=float).reshape(k, 3)
+    uv = (np.array([tri.UVNode(i).Coord() for i in range(1, k + 1)], dtype=float).reshape(k, 2)
+          if tri.HasUVNodes() else None)
+    tris = np.array([tri.Triangle(i).Get() for i in range(1, t + 1)], dtype=np.int64).reshape(t, 3) - 1
+    return nodes, uv, tris
+
+
+@dataclass
+class FacePatch:
+    """One face's triangles before welding: local nodes and their topological keys.
+
+    nodes (k, 3) world mm · uv (k, 2) · tris (t, 3) local indices, oriented outward ·
+    node_vertex (k,) B-rep vertex index or −1 · node_edge (k,) B-rep edge index or −1 ·
+    node_param (k,) parameter on that edge.
+    """
+
+    face_id: int
+    nodes: np.ndarray
+    uv: np.ndarray | None
+    tris: np.ndarray
+    node_vertex: np.ndarray
+    node_edge: np.ndarray
+    node_param: np.ndarray
+    meshed_by: str = "occt"
+
+
+@dataclass
+class Topology:
+    """Indexed B-rep edges and vertices of a shape, and each edge's discretisation (sorted parameters)."""
+
+    edges: TopTools_IndexedMapOfShape
+    vertices: TopTools_IndexedMapOfShape
+    edge_params: dict[int, np.ndarray] = field(default_factory=dict)
+    parent: dict[int, int] = field(default_factory=dict)  # union-find over B-rep vertices of collapsed edges
+
+    def merge_vertices(self, a: int, b: int) -> None:
+        """Record that the mesher collapsed an edge: its two end vertices become one mesh vertex."""
+        ra, rb = self.root(a), self.root(b)
+        if ra != rb:
+            self.parent[max(ra, rb)] = min(ra, rb)
+
+    def root(self, v: int) -> int:
+        while v in self.parent:
+            v = self.parent[v]
+        return v
+
+    def vertex_roots(self) -> np.ndarray:
+        """(n_vertices,) the representative of each B-rep vertex after edge collapses."""
+        roots = np.arange(self.vertices.Extent())
+        for v in list(self.parent):
+            roots[v] = self.root(v)
+        return roots
+
+    @classmethod
+    def of(cls, shape: TopoDS_Shape) -> Topology:
+        e, v = TopTools_IndexedMapOfShape(), TopTools_IndexedMapOfShape()
+        TopExp.MapShapes_s(shape, TopAbs_EDGE, e)
+        TopExp.MapShapes_s(shape, TopAbs_VERTEX, v)
+        return cls(e, v)
+
+    def edge_index(self, edge: TopoDS_Edge) -> int:
+        return self.edges.FindIndex(edge) - 1
+
+    def vertex_index(self, vertex) -> int:  # type: ignore[no-untyped-def]
+        return self.vertices.FindIndex(vertex) - 1
+
+    def edge_ends(self, edge: TopoDS_Edge) -> tuple[int, float, int, float]:
+        """(first vertex, its parameter, last vertex, its parameter) of an edge, orientation ignored."""
+        e = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
+        v1, v2 = TopExp.FirstVertex_s(e), TopExp.LastVertex_s(e)
+        return (self.vertex_index(v1), BRep_Tool.Parameter_s(v1, e),
+                self.vertex_index(v2), BRep_Tool.Parameter_s(v2, e))
+
+
+def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
+    """The oriented edges of a face (a seam edge comes twice, once per orientation)."""
+    out = []
+    exp = TopExp_Explorer(face, TopAbs_EDGE)
+    while exp.More():
+        out.append(TopoDS.Edge_s(exp.Current()))
+        exp.Next()
+    return out
+
+
+def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology) -> FacePatch | None:
+    """A face's OCCT triangulation as a FacePatch with edge keys, or None when it has none or a broken one."""
+    loc = TopLoc_Location()
+    tri = BRep_Tool.Triangulation_s(face, loc)
+    if tri is None or tri.NbTriangles() == 0:
+        return None
+    nodes, uv, tris = triangulation_arrays(tri)
+    k = len(nodes)
+    if tris.min(initial=0) < 0 or tris.max(initial=0) >= k:
+        return None
+    nodes = apply_trsf(trsf_matrix(loc), nodes)
+    if face.Orientation() == TopAbs_REVERSED:
+        tris = tris[:, [0, 2, 1]]
+    node_vertex = np.full(k, -1, np.int64)
+    node_edge = np.full(k, -1, np.int64)
+    node_param = np.full(k, np.nan)
+    has_surface = BRep_Tool.Surface_s(face) is not None
+    for edge in face_edges(face):
+        poly = BRep_Tool.PolygonOnTriangulation_s(edge, tri, loc)
+        if poly is None:
+            if not has_surface:  # tessellated-only face: topology is the file's shared coordinates
+                continue
+            return None
+        ids = np.array([poly.Node(i) for i in range(1, poly.NbNodes() + 1)], dtype=np.int64) - 1
+        if not poly.HasParameters():
+            return None
+        par = np.array([poly.Parameter(i) for i in range(1, poly.NbNodes() + 1)])
+        if ids.min() < 0 or ids.max() >= k:
+            return None
+        ei = topo.edge_index(edge)
+        v1, p1, v2, p2 = topo.edge_ends(edge)
+        if BRep_Tool.Degenerated_s(edge):
+            node_vertex[ids] = v1
+            continue
+        topo.edge_params.setdefault(ei, np.sort(par))
+        node_edge[ids] = ei
+        node_param[ids] = par
+        ends = ids[[0, -1]]
+        end_par = par[[0, -1]]
+        if ends[0] == ends[1] and v1 != v2:  # BRepMesh collapsed an edge shorter than its min size
+            topo.merge_vertices(v1, v2)
+        for node, t in zip(ends, end_par, strict=False):
+            node_vertex[node] = v1 if abs(t - p1) <= abs(t - p2) else v2
+    return FacePatch(face_id, nodes, uv, tris, node_vertex, node_edge, node_param,
+                     meshed_by="occt" if has_surface else "stored")
+
+
+def check_patch_boundary(patch: FacePatch) -> bool:
+    """True when every edge used once within the face lies on its B-rep boundary (both ends on edges/vertices)."""
+    t = patch.tris
+    d = np.stack([t, np.roll(t, -1, axis=1)], axis=2).reshape(-1, 2)
+    key = np.sort(d, axis=1)
+    _, inv, cnt = np.unique(key[:, 0] * (len(patch.nodes) + 1) + key[:, 1], return_inverse=True, return_counts=True)
+    once = key[cnt[inv] == 1]
+    on_boundary = (patch.node_edge >= 0) | (patch.node_vertex >= 0)
+    return bool(on_boundary[once].all())

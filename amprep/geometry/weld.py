@@ -1,0 +1,60 @@
+"""Join face patches into one Mesh by topology: a node on a B-rep vertex is that vertex, a node on a B-rep
+edge is (edge, parameter); tessellated-only faces (no surface) share nodes with identical coordinates,
+which is how their file shares its coordinate list."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
+from .tessellate import FacePatch
+
+
+def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np.ndarray | None = None) -> Mesh:
+    """One Mesh from per-face patches; triangles that collapse onto one vertex (poles, apexes, edges the mesher
+    collapsed) are dropped. vertex_roots (n_brep_vertices,) maps B-rep vertices identified by collapsed edges."""
+    if not patches:
+        return Mesh.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), np.int64)).with_arrays(faces=faces)
+    nodes = np.concatenate([p.nodes for p in patches])
+    vert = np.concatenate([p.node_vertex for p in patches])
+    if vertex_roots is not None and len(vertex_roots):
+        vert = np.where(vert >= 0, vertex_roots[np.maximum(vert, 0)], -1)
+    edge = np.concatenate([p.node_edge for p in patches])
+    param = np.concatenate([p.node_param for p in patches])
+    stored = np.concatenate([np.full(len(p.nodes), p.meshed_by == "stored") for p in patches])
+    offsets = np.cumsum([0] + [len(p.nodes) for p in patches[:-1]])
+
+    n = len(nodes)
+    dim = np.full(n, IN_FACE, np.int8)
+    entity = np.concatenate([np.full(len(p.nodes), p.face_id, np.int64) for p in patches])
+    key = np.zeros((n, 4))  # (category, a, b, c): rows equal ⇔ same mesh vertex
+    on_v = vert >= 0
+    on_e = (~on_v) & (edge >= 0)
+    free_stored = (~on_v) & (~on_e) & stored
+    interior = (~on_v) & (~on_e) & (~stored)
+    key[on_v, 0], key[on_v, 1] = 0, vert[on_v]
+    key[on_e, 0], key[on_e, 1], key[on_e, 2] = 1, edge[on_e], param[on_e]
+    key[free_stored, 0] = 2
+    key[free_stored, 1:] = nodes[free_stored]
+    key[interior, 0], key[interior, 1] = 3, np.flatnonzero(interior)
+    dim[on_v], entity[on_v] = ON_BREP_VERTEX, vert[on_v]
+    dim[on_e], entity[on_e] = ON_BREP_EDGE, edge[on_e]
+    _, first, gid = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    gid = gid.reshape(-1)
+
+    tris = np.concatenate([gid[p.tris + o] for p, o in zip(patches, offsets, strict=False)])
+    face_ids = np.concatenate([np.full(len(p.tris), p.face_id, np.int32) for p in patches])
+    uv = np.concatenate([
+        p.uv[p.tris] if p.uv is not None else np.full((len(p.tris), 3, 2), np.nan) for p in patches
+    ])
+    keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
+    tris, face_ids, uv = tris[keep], face_ids[keep], uv[keep]
+    used = np.unique(tris)
+    remap = np.full(len(first), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    src = first[used]
+    return Mesh(
+        vertices=nodes[src], triangles=remap[tris], face_ids=face_ids, uv=uv,
+        vertex_dim=dim[src], vertex_entity=entity[src].astype(np.int32),
+        vertex_param=np.where(dim[src] == ON_BREP_EDGE, param[src], np.nan), faces=faces,
+    )

@@ -1,0 +1,72 @@
+"""The `amprep` command as a user runs it: a real subprocess, real files."""
+
+import json
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from amprep.geometry.io_stl import read_stl
+from tests.conftest import corpus
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "amprep", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_inch_step_gives_mm_stl_with_provenance_header(tmp_path):
+    out = tmp_path / "part.stl"
+    report = tmp_path / "r.json"
+    r = run("convert", str(corpus("featuretype_inch_ap214.step")), "-o", str(out), "--tolerance", "0.05",
+            "--report", str(report))
+    assert r.returncode == 0, r.stderr
+    assert "inch" in r.stdout and "closed" in r.stdout
+    mesh = read_stl(out)
+    lo, hi = mesh.bbox()
+    np.testing.assert_allclose(hi - lo, [127, 63.5, 34.925], atol=0.01)
+    header = out.read_bytes()[:80].decode()
+    assert "amprep" in header and "occt 7." in header and "tol 0.05mm" in header
+    summary = json.loads(report.read_text())
+    assert summary["input"]["units"] == "inch"
+    assert summary["mesh"]["watertight"] is True
+    assert summary["meshing"]["max_chordal_error"] <= 0.05
+    assert summary["provenance"]["params"]["tolerance"] == 0.05
+
+
+def test_3mf_output_and_ascii_output(tmp_path):
+    r = run("convert", str(corpus("voron_vhb_din_mount.step")), "-o", str(tmp_path / "p.3mf"), "--quiet")
+    assert r.returncode == 0 and r.stdout == "", r.stderr
+    r = run("convert", str(corpus("voron_vhb_din_mount.step")), "-o", str(tmp_path / "p.stl"), "--ascii")
+    assert r.returncode == 0
+    assert (tmp_path / "p.stl").read_text().startswith("solid amprep")
+
+
+def test_stl_passthrough_reports_defects(tmp_path):
+    r = run("convert", str(corpus("triangle_soup.stl")), "-o", str(tmp_path / "s.stl"))
+    assert r.returncode == 0
+    assert "OPEN" in r.stdout and "300 boundary" in r.stdout
+
+
+@pytest.mark.parametrize("content,code", [
+    (b"", "empty_model"),
+    (b"just some words\n", "unsupported_format"),
+    (b"ISO-10303-21;\nHEADER;\nbroken", "unreadable_cad"),
+    (b"\0" * 80 + struct.pack("<I", 0), "unsupported_format"),
+])
+def test_bad_input_one_line_stable_code_exit_2(tmp_path, content, code):
+    p = tmp_path / "input.step"
+    p.write_bytes(content)
+    r = run("convert", str(p), "-o", str(tmp_path / "o.stl"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and f"[{code}]" in lines[0], r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_bad_output_extension_and_parameter(tmp_path):
+    r = run("convert", str(corpus("voron_vhb_din_mount.step")), "-o", str(tmp_path / "o.obj"))
+    assert r.returncode == 2 and "[invalid_parameter]" in r.stderr
+    r = run("convert", str(corpus("voron_vhb_din_mount.step")), "-o", str(tmp_path / "o.stl"), "--tolerance", "-1")
+    assert r.returncode == 2 and "[invalid_parameter]" in r.stderr

@@ -1,0 +1,73 @@
+import numpy as np
+import pytest
+
+from amprep.geometry.cad import model_from_shape
+from amprep.geometry.checks import check_mesh
+from amprep.geometry.errors import AmprepError, ErrorCode
+from amprep.geometry.io_3mf import read_3mf_objects, write_3mf
+from amprep.geometry.io_stl import read_stl, stl_bytes, write_stl
+from amprep.geometry.mesher import mesh_model
+from amprep.geometry.tessellate import MeshParams
+from tests.conftest import STL_FILES, corpus
+
+
+@pytest.fixture(scope="module")
+def torus_mesh(reference_solids):
+    return mesh_model(model_from_shape(reference_solids["torus"]), MeshParams(tolerance=0.05)).mesh
+
+
+@pytest.mark.parametrize("ascii", [False, True])
+def test_stl_round_trip_keeps_topology(torus_mesh, tmp_path, ascii):
+    p = tmp_path / "t.stl"
+    write_stl(torus_mesh, p, ascii=ascii, header="amprep test")
+    back = read_stl(p)
+    assert back.n_triangles == torus_mesh.n_triangles
+    assert check_mesh(back).closed  # distinct vertices stay distinct in float32 / %.9e
+    tol = 1e-5 * 25 if not ascii else 1e-7 * 25  # binary STL is float32
+    np.testing.assert_allclose(back.vertices[back.triangles], torus_mesh.corners, atol=tol)
+
+
+def test_binary_header_never_starts_with_solid(torus_mesh):
+    assert not stl_bytes(torus_mesh, header="solid trouble")[:5].lower() == b"solid"
+
+
+@pytest.mark.parametrize("name", STL_FILES)
+def test_corpus_stl_reads(name):
+    m = read_stl(corpus(name))
+    assert m.n_triangles > 0 and np.isfinite(m.vertices).all()
+
+
+def test_corpus_stl_defects_are_counted():
+    assert check_mesh(read_stl(corpus("voron_rear_skirt_nonmanifold.stl"))).nonmanifold_edges == 6083
+    assert check_mesh(read_stl(corpus("triangle_soup.stl"))).boundary_edges == 300
+    assert check_mesh(read_stl(corpus("voron_vhb_din_mount.stl"))).closed
+
+
+def test_truncated_stl_is_a_clean_error(tmp_path):
+    p = tmp_path / "bad.stl"
+    p.write_bytes(b"solid x\nfacet normal 0 0 1\n outer loop\n vertex 0 0 nope\n")
+    with pytest.raises(AmprepError) as err:
+        read_stl(p)
+    assert err.value.code in (ErrorCode.UNREADABLE_MESH, ErrorCode.EMPTY_MODEL)
+
+
+def test_3mf_objects_closed_with_face_ids(tmp_path, reference_solids):
+    import cadquery as cq
+    import lib3mf
+    two = cq.Compound.makeCompound([cq.Shape.cast(reference_solids["torus"]),
+                                    cq.Shape.cast(reference_solids["cylinder"]).translate(cq.Vector(60, 0, 0))])
+    mesh = mesh_model(model_from_shape(two.wrapped), MeshParams(tolerance=0.05)).mesh
+    p = tmp_path / "two.3mf"
+    verdicts = write_3mf(mesh, p, {"generator": "amprep test"})
+    assert verdicts == [True, True]
+    objects = read_3mf_objects(p)
+    assert len(objects) == 2 and all(o[3] for o in objects)
+    assert sum(len(o[2]) for o in objects) == mesh.n_triangles
+    model = lib3mf.get_wrapper().CreateModel()
+    model.QueryReader("3mf").ReadFromFile(str(p))
+    assert model.GetUnit() == lib3mf.ModelUnit.MilliMeter
+    it = model.GetMeshObjects()
+    sets = 0
+    while it.MoveNext():
+        sets += it.GetCurrentMeshObject().GetTriangleSetCount()
+    assert sets == len(mesh.faces)  # one triangle set per CAD face

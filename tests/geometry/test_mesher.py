@@ -1,0 +1,121 @@
+"""Conversion core: closed by topology, the tolerance kept on every face, fallback meshing, no stale mesh."""
+
+import numpy as np
+import pytest
+
+from amprep.geometry.cad import model_from_shape, read_cad
+from amprep.geometry.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.mesher import mesh_model
+from amprep.geometry.tessellate import MeshParams
+from tests.conftest import CAD_FILES, OPEN_CAD, corpus
+
+# distance of a point to the exact surface, independent of the (u,v) sampling our mesher uses
+EXACT_DISTANCE = {
+    "sphere": lambda p: np.abs(np.linalg.norm(p, axis=1) - 12),
+    "cylinder": lambda p: np.where((p[:, 2] > 1e-9) & (p[:, 2] < 30 - 1e-9),
+                                   np.abs(np.linalg.norm(p[:, :2], axis=1) - 10), 0.0),
+    "torus": lambda p: np.abs(np.hypot(np.linalg.norm(p[:, :2], axis=1) - 20, p[:, 2]) - 5),
+}
+
+
+def _closed_solid(mesh):
+    c = check_mesh(mesh)
+    assert c.boundary_edges == 0 and c.nonmanifold_edges == 0 and c.misoriented_edges == 0, c
+    assert c.degenerate_triangles == 0, c
+    assert c.volume > 0
+    assert manifold3d_accepts(mesh)
+    return c
+
+
+def _sample_triangles(mesh, order=8):
+    w = np.array([(i, j, order - i - j) for i in range(order + 1) for j in range(order + 1 - i)], float) / order
+    return np.einsum("pk,mkd->mpd", w, mesh.corners).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("tol", [0.1, 0.01])
+@pytest.mark.parametrize("name", ["sphere", "torus", "cylinder", "cone", "filleted_block", "bspline_loft",
+                                  "plate_with_holes"])
+def test_reference_solids_closed_and_within_tolerance(reference_solids, name, tol):
+    r = mesh_model(model_from_shape(reference_solids[name]), MeshParams(tolerance=tol))
+    _closed_solid(r.mesh)
+    assert r.max_error <= tol
+    if name in EXACT_DISTANCE:
+        dist = EXACT_DISTANCE[name](_sample_triangles(r.mesh))
+        assert dist.max() <= tol * 1.001, dist.max() / tol
+
+
+def test_sphere_poles_close_where_occt_export_is_open(reference_solids):
+    """OCCT's StlAPI_Writer leaves the sphere open at its poles; ours collapses the pole triangles by topology."""
+    r = mesh_model(model_from_shape(reference_solids["sphere"]), MeshParams(tolerance=0.01))
+    c = _closed_solid(r.mesh)
+    assert abs(c.volume - 4 / 3 * np.pi * 12**3) / (4 / 3 * np.pi * 12**3) < 0.01
+
+
+@pytest.mark.parametrize("name", ["sphere", "torus", "cylinder", "cone", "filleted_block", "bspline_loft",
+                                  "plate_with_holes"])
+def test_forced_fallback_on_every_face_of_reference_solids(reference_solids, name):
+    r = mesh_model(model_from_shape(reference_solids[name]), MeshParams(tolerance=0.05, force_fallback=True))
+    assert set(r.fallback_faces) == set(range(len(r.mesh.faces)))
+    assert all(f.meshed_by == "fallback" for f in r.mesh.faces)
+    _closed_solid(r.mesh)
+    assert r.max_error <= 0.05
+    if name in EXACT_DISTANCE:
+        assert EXACT_DISTANCE[name](_sample_triangles(r.mesh)).max() <= 0.05 * 1.001
+
+
+@pytest.mark.parametrize("name", [n for n in CAD_FILES if n not in OPEN_CAD and "tessellated" not in n])
+@pytest.mark.parametrize("force", [False, True], ids=["occt", "forced_fallback"])
+def test_corpus_solids_close_by_topology(name, force):
+    r = mesh_model(read_cad(corpus(name)), MeshParams(tolerance=0.1, force_fallback=force))
+    _closed_solid(r.mesh)
+    assert r.max_error <= 0.1
+    assert not r.unmeshed_faces
+    assert np.all(np.bincount(r.mesh.face_ids, minlength=len(r.mesh.faces)) > 0), "a face got no triangles"
+
+
+@pytest.mark.parametrize("name", sorted(OPEN_CAD))
+def test_open_iges_converts_to_an_open_mesh(name):
+    r = mesh_model(read_cad(corpus(name)), MeshParams(tolerance=0.5))
+    c = check_mesh(r.mesh)
+    assert c.boundary_edges > 0 and c.nonmanifold_edges == 0 and c.degenerate_triangles == 0
+    assert r.max_error <= 0.5
+
+
+def test_nist_ctc02_collapsed_short_edges_are_welded():
+    """CTC-02 has 0.0004 mm edges that BRepMesh collapses on one face only: the weld identifies their vertices."""
+    r = mesh_model(read_cad(corpus("nist_ctc02_ap242.stp")), MeshParams(tolerance=0.1))
+    _closed_solid(r.mesh)
+    assert {"plane", "cylinder", "cone", "sphere", "torus", "bspline"} <= {f.surface_type for f in r.mesh.faces}
+
+
+def test_no_stale_triangulation(reference_solids):
+    model = model_from_shape(reference_solids["torus"])
+    coarse = mesh_model(model, MeshParams(tolerance=0.1))
+    fine = mesh_model(model, MeshParams(tolerance=0.01))
+    assert fine.mesh.n_triangles > 3 * coarse.mesh.n_triangles
+    assert fine.max_error <= 0.01
+    again = mesh_model(model, MeshParams(tolerance=0.1))
+    assert again.mesh.n_triangles == coarse.mesh.n_triangles
+
+
+def test_relative_tolerance_is_a_fraction_of_the_bbox_diagonal(reference_solids):
+    r = mesh_model(model_from_shape(reference_solids["sphere"]), MeshParams(relative=0.001))
+    assert r.tolerance == pytest.approx(0.001 * np.sqrt(3) * 24, rel=1e-3)
+    assert r.max_error <= r.tolerance
+
+
+@pytest.mark.parametrize("algorithm", ["delabella", "watson"])
+def test_both_occt_algorithms(reference_solids, algorithm):
+    r = mesh_model(model_from_shape(reference_solids["filleted_block"]), MeshParams(tolerance=0.05, algorithm=algorithm))
+    _closed_solid(r.mesh)
+    assert r.max_error <= 0.05
+
+
+@pytest.mark.parametrize("bad", [dict(tolerance=0), dict(tolerance=-1), dict(tolerance=float("nan")),
+                                 dict(relative=2.0), dict(angular=0), dict(algorithm="magic")])
+def test_invalid_parameters(reference_solids, bad):
+    from amprep.geometry.errors import AmprepError, ErrorCode
+
+    with pytest.raises(AmprepError) as err:
+        mesh_model(model_from_shape(reference_solids["sphere"]), MeshParams(**bad))
+    assert err.value.code == ErrorCode.INVALID_PARAMETER
