@@ -1,6 +1,7 @@
 """The `amprep` command as a user runs it: a real subprocess, real files."""
 
 import json
+import os
 import struct
 import subprocess
 import sys
@@ -13,7 +14,9 @@ from tests.conftest import corpus
 
 
 def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "amprep", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+    env = {**os.environ, "PYTHONUTF8": "1"}
+    return subprocess.run([sys.executable, "-m", "amprep", *args], capture_output=True, encoding="utf-8",
+                          errors="replace", cwd=cwd, timeout=300, env=env)
 
 
 def test_inch_step_gives_mm_stl_with_provenance_header(tmp_path):

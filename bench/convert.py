@@ -1,0 +1,264 @@
+"""Conversion benchmark: amprep vs the bare OCCT pipeline (both mesh algorithms), cascadio and gmsh.
+
+Every measurement runs in its own child process (peak RSS from wait4), end to end, file in → STL out.
+Prints a table and writes docs/bench_convert.md and docs/bench_convert.csv.
+
+    python bench/convert.py                   # test parts at 0.1/0.01/0.001, corpus at 0.1/0.01 (+0.001 if small)
+    python bench/convert.py --quick           # 0.1 and 0.01 on the test parts and the small corpus parts
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = Path(os.environ.get("AMPREP_CORPUS", ROOT.parent / "shared" / "corpus"))
+TOOLS = ["amprep", "occt-delabella", "occt-watson", "cascadio", "gmsh"]
+SMALL_DIAG = 120.0  # mm: parts this small also run at 0.001 mm
+
+
+# ----------------------------------------------------------------------------------------- child side
+def _occt_read(path: str):
+    from amprep.geometry.cad import read_cad
+
+    return read_cad(path)
+
+
+def _mesh_checks(stl: str) -> dict:
+    from amprep.geometry.checks import check_mesh
+    from amprep.geometry.io_stl import read_stl
+
+    c = check_mesh(read_stl(stl))
+    return dict(triangles=c.triangles, boundary=c.boundary_edges, nonmanifold=c.nonmanifold_edges,
+                degenerate=c.degenerate_triangles, closed=c.closed)
+
+
+def _occt_deviation(model, tol: float) -> float:
+    """Worst chordal error / tolerance of OCCT's own per-face triangulations (as StlAPI_Writer exports them)."""
+    import numpy as np
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_REVERSED
+    from OCP.TopLoc import TopLoc_Location
+
+    from amprep.geometry.chordal import triangle_chordal_error
+    from amprep.geometry.surfaces import surface_of
+    from amprep.geometry.tessellate import apply_trsf, triangulation_arrays, trsf_matrix
+
+    worst = 0.0
+    for face in model.faces:
+        loc = TopLoc_Location()
+        tri = BRep_Tool.Triangulation_s(face, loc)
+        if tri is None or BRep_Tool.Surface_s(face) is None:
+            continue
+        nodes, uv, tris = triangulation_arrays(tri)
+        if uv is None or len(tris) == 0:
+            continue
+        if face.Orientation() == TopAbs_REVERSED:
+            tris = tris[:, [0, 2, 1]]
+        nodes = apply_trsf(trsf_matrix(loc), nodes)
+        err = triangle_chordal_error(nodes[tris], uv[tris], surface_of(face).evaluate)
+        worst = max(worst, float(np.max(err, initial=0)))
+    return worst / tol
+
+
+def child(tool: str, path: str, tol: float, out: str) -> dict:
+    res: dict = {}
+    if tool == "amprep":
+        from amprep.geometry.convert import convert, write_result
+        from amprep.geometry.tessellate import MeshParams
+
+        t = time.perf_counter()
+        r = convert(path, MeshParams(tolerance=tol))
+        write_result(r, out)
+        res["seconds"] = time.perf_counter() - t
+        res["deviation_ratio"] = r.meshing.max_error / tol if r.meshing else None
+    elif tool.startswith("occt-"):
+        from OCP.BRepMesh import BRepMesh_IncrementalMesh
+        from OCP.BRepTools import BRepTools
+        from OCP.IMeshTools import (
+            IMeshTools_MeshAlgoType_Delabella,
+            IMeshTools_MeshAlgoType_Watson,
+            IMeshTools_Parameters,
+        )
+        from OCP.StlAPI import StlAPI_Writer
+
+        t = time.perf_counter()
+        model = _occt_read(path)
+        BRepTools.Clean_s(model.shape)
+        p = IMeshTools_Parameters()
+        p.Deflection, p.Angle, p.InParallel = tol, 0.5, True
+        p.MeshAlgo = IMeshTools_MeshAlgoType_Delabella if tool == "occt-delabella" else IMeshTools_MeshAlgoType_Watson
+        BRepMesh_IncrementalMesh(model.shape, p)
+        w = StlAPI_Writer()
+        w.ASCIIMode = False
+        w.Write(model.shape, out)
+        res["seconds"] = time.perf_counter() - t
+        res["deviation_ratio"] = _occt_deviation(model, tol)
+    elif tool == "cascadio":
+        import cascadio
+        import trimesh
+
+        glb = out + ".glb"
+        t = time.perf_counter()
+        cascadio.step_to_glb(path, glb, tol, 0.5)
+        scene = trimesh.load(glb, force="scene")
+        trimesh.util.concatenate(scene.dump()).export(out)
+        res["seconds"] = time.perf_counter() - t
+        res["deviation_ratio"] = None
+    elif tool == "gmsh":
+        import gmsh
+
+        t = time.perf_counter()
+        gmsh.initialize(interruptible=False)
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("Geometry.OCCTargetUnit", 1)  # keep OCCT's mm
+        gmsh.model.occ.importShapes(path)
+        gmsh.model.occ.synchronize()
+        # gmsh has no chord tolerance: size from curvature, elements per 2π chosen so that a radius of 5 mm
+        # gets sagitta ≈ tol (n = π / acos(1 − tol / r))
+        import math
+
+        n = max(6, math.ceil(math.pi / math.acos(max(-1.0, 1 - tol / 5.0))))
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", n)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(out)
+        gmsh.finalize()
+        res["seconds"] = time.perf_counter() - t
+        res["deviation_ratio"] = None
+    res.update(_mesh_checks(out))
+    return res
+
+
+# ----------------------------------------------------------------------------------------- parent side
+def test_parts(folder: Path) -> list[Path]:
+    """The reference solids of the tests, written as STEP so that every tool reads the same file."""
+    import cadquery as cq
+
+    parts = {
+        "sphere_r12": cq.Solid.makeSphere(12, angleDegrees1=-90, angleDegrees2=90),
+        "torus_R20_r5": cq.Solid.makeTorus(20, 5),
+        "cylinder_r10": cq.Solid.makeCylinder(10, 30),
+        "bspline_loft": cq.Workplane("XY").circle(8).workplane(offset=10).rect(10, 6).workplane(offset=10)
+        .circle(5).loft(combine=True).val(),
+    }
+    out = []
+    for name, shape in parts.items():
+        p = folder / f"{name}.step"
+        cq.exporters.export(cq.Workplane().add(shape), str(p))
+        out.append(p)
+    return out
+
+
+def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        out = str(Path(tmp) / "out.stl")
+        cmd = [sys.executable, __file__, "--child", tool, str(path), str(tol), out]
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        start = time.monotonic()
+        while proc.poll() is None and time.monotonic() - start < timeout:
+            time.sleep(0.05)
+        if proc.poll() is None:
+            proc.kill()
+            os.wait4(proc.pid, 0)
+            return {"error": f"timeout {timeout:.0f}s"}
+        _, status, usage = os.wait4(proc.pid, 0) if proc.returncode is None else (0, 0, None)
+        text = proc.stdout.read() if proc.stdout else ""
+        rss = usage.ru_maxrss / 1024 if usage else None
+        try:
+            res = json.loads(text.strip().splitlines()[-1])
+        except (ValueError, IndexError):
+            return {"error": f"exit {proc.returncode}", "peak_rss_mb": rss}
+        res["peak_rss_mb"] = rss
+        return res
+
+
+def _diag(path: Path) -> float:
+    from amprep.geometry.cad import read_cad
+    from amprep.geometry.mesher import bbox_diagonal
+
+    return bbox_diagonal(read_cad(path))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--child", nargs=4, metavar=("TOOL", "INPUT", "TOL", "OUT"))
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--timeout", type=float, default=900)
+    ap.add_argument("--tools", default=",".join(TOOLS))
+    ap.add_argument("--only", default="", help="comma-separated substrings of part names")
+    args = ap.parse_args()
+    if args.child:
+        tool, path, tol, out = args.child
+        print(json.dumps(child(tool, path, float(tol), out)))
+        return
+    tools = args.tools.split(",")
+    tmp = Path(tempfile.mkdtemp(prefix="amprep-bench-"))
+    parts = test_parts(tmp) + sorted(p for p in CORPUS.glob("*") if p.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep"))
+    if args.only:
+        parts = [p for p in parts if any(s in p.name for s in args.only.split(","))]
+    rows = []
+    for part in parts:
+        diag = _diag(part)
+        tols = [0.1, 0.01] + ([0.001] if (diag <= SMALL_DIAG or part.parent == tmp) and not args.quick else [])
+        if args.quick and diag > SMALL_DIAG * 4:
+            continue
+        for tol in tols:
+            for tool in tools:
+                if tool == "cascadio" and part.suffix.lower() not in (".step", ".stp"):
+                    continue
+                res = run_one(tool, part, tol, args.timeout)
+                row = {"part": part.stem, "tolerance": tol, "tool": tool, **res}
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    write_tables(rows)
+
+
+def write_tables(rows: list[dict]) -> None:
+    docs = ROOT / "docs"
+    docs.mkdir(exist_ok=True)
+    fields = ["part", "tolerance", "tool", "seconds", "ratio_vs_fastest_occt", "triangles", "closed", "boundary",
+              "nonmanifold", "degenerate", "deviation_ratio", "peak_rss_mb", "error"]
+    for r in rows:
+        occt = [o["seconds"] for o in rows if o["part"] == r["part"] and o["tolerance"] == r["tolerance"]
+                and o["tool"].startswith("occt-") and "seconds" in o]
+        if "seconds" in r and occt:
+            r["ratio_vs_fastest_occt"] = r["seconds"] / min(occt)
+    with open(docs / "bench_convert.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+
+    def fmt(v, spec):
+        return "" if v is None or v == "" else format(v, spec)
+
+    lines = ["| part | tol mm | tool | s | ×fastest OCCT | triangles | closed | boundary | non-manifold | "
+             "degenerate | max dev / tol | peak RSS MB |", "|" + "---|" * 12]
+    for r in rows:
+        if "error" in r and "seconds" not in r:
+            lines.append(f"| {r['part']} | {r['tolerance']:g} | {r['tool']} | {r['error']} |||||||||")
+            continue
+        lines.append(
+            f"| {r['part']} | {r['tolerance']:g} | {r['tool']} | {fmt(r.get('seconds'), '.2f')} | "
+            f"{fmt(r.get('ratio_vs_fastest_occt'), '.2f')} | {r['triangles']:,} | {'yes' if r['closed'] else 'no'} | "
+            f"{r['boundary']} | {r['nonmanifold']} | {r['degenerate']} | {fmt(r.get('deviation_ratio'), '.2f')} | "
+            f"{fmt(r.get('peak_rss_mb'), '.0f')} |")
+    table = "\n".join(lines)
+    (docs / "bench_convert.md").write_text(
+        "# Conversion benchmark\n\nMade by `python bench/convert.py` (one child process per cell, end to end: "
+        "read → mesh → write STL; closedness from the written STL with identical-coordinate vertices). "
+        "`max dev / tol` is the worst sampled chordal error over all faces divided by the tolerance (n/a for "
+        "cascadio and gmsh, whose output carries no (u,v)). gmsh has no chord tolerance: its size comes from "
+        "curvature with elements per 2π set so a 5 mm radius gets the tolerance as sagitta.\n\n" + table + "\n")
+    print(table)
+
+
+if __name__ == "__main__":
+    main()
