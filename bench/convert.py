@@ -119,7 +119,7 @@ def child(tool: str, path: str, tol: float, out: str) -> dict:
         t = time.perf_counter()
         gmsh.initialize(interruptible=False)
         gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("Geometry.OCCTargetUnit", 1)  # keep OCCT's mm
+        gmsh.option.setString("Geometry.OCCTargetUnit", "MM")
         gmsh.model.occ.importShapes(path)
         gmsh.model.occ.synchronize()
         # gmsh has no chord tolerance: size from curvature, elements per 2π chosen so that a radius of 5 mm
@@ -161,17 +161,21 @@ def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / "out.stl")
         cmd = [sys.executable, __file__, "--child", tool, str(path), str(tol), out]
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        start = time.monotonic()
-        while proc.poll() is None and time.monotonic() - start < timeout:
-            time.sleep(0.05)
-        if proc.poll() is None:
-            proc.kill()
-            os.wait4(proc.pid, 0)
-            return {"error": f"timeout {timeout:.0f}s"}
-        _, status, usage = os.wait4(proc.pid, 0) if proc.returncode is None else (0, 0, None)
-        text = proc.stdout.read() if proc.stdout else ""
-        rss = usage.ru_maxrss / 1024 if usage else None
+        with open(Path(tmp) / "result.json", "w+") as sink:
+            proc = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True)
+            start = time.monotonic()
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            while pid == 0 and time.monotonic() - start < timeout:
+                time.sleep(0.05)
+                pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid == 0:
+                proc.kill()
+                os.wait4(proc.pid, 0)
+                return {"error": f"timeout {timeout:.0f}s"}
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            sink.seek(0)
+            text = sink.read()
+        rss = usage.ru_maxrss / 1024
         try:
             res = json.loads(text.strip().splitlines()[-1])
         except (ValueError, IndexError):

@@ -139,9 +139,10 @@ def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
 
 
 def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
-              angular: float, order: int = 6) -> FacePatch:
-    """A FacePatch for one face: CDT of its boundary loops in scaled (u,v), points inserted (longest inner edge
-    midpoint, else centroid) in every triangle whose chordal error exceeds the tolerance, until none does."""
+              angular: float, order: int = 6, seeds: np.ndarray | None = None) -> FacePatch:
+    """A FacePatch for one face: CDT of its boundary loops in scaled (u,v) (plus `seeds` (k, 2) interior (u,v)
+    points, e.g. an earlier mesh's), points inserted (longest inner edge midpoint, else centroid) in every
+    triangle whose chordal error exceeds the tolerance, until none does."""
     loops = boundary_loops(face, topo, tolerance, angular)
     if not loops:
         raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
@@ -160,6 +161,10 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     tris = _cdt(pts, segments, None)
     cent = pts[tris].mean(axis=1)
     holes = cent[~_inside(cent, scaled_loops)]
+    if seeds is not None and len(seeds):
+        inner = seeds * scale
+        inner = inner[_inside(inner, scaled_loops)]
+        pts = np.concatenate([pts, np.unique(inner, axis=0)])
     tris = _cdt(pts, segments, holes)
     for _ in range(MAX_ROUNDS):
         uv = pts / scale

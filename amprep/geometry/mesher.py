@@ -30,6 +30,8 @@ ENFORCE_ROUNDS = 4
 #: faces are refined until their sampled error is ≤ this × tolerance: the order-6 grid can miss up to ~0.5 %
 #: of the true maximum between its points (measured on a sphere against the exact distance), so aim below it
 ENFORCE_MARGIN = 0.98
+#: a face is re-meshed only when its sampled error exceeds this × tolerance (OCCT's mesh is kept otherwise)
+TRIGGER_MARGIN = 0.995
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,9 +116,13 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
             surf = surfaces[i]
             if surf is None:
                 continue
+            old = patches[i]
+            seeds = None
+            if old is not None and old.uv is not None:
+                seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
             try:
                 patches[i] = mesh_face(i, model.faces[i], topo, surf, tol * ENFORCE_MARGIN, params.angular,
-                                       params.sample_order)
+                                       params.sample_order, seeds)
             except AmprepError:
                 patches[i] = None
                 unmeshed.append(i)
@@ -126,8 +132,8 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
         if not params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
             break
         target = tol * ENFORCE_MARGIN
-        over = [i for i in range(n_faces)
-                if patches[i] is not None and len(errors[i]) and np.nanmax(errors[i], initial=0) > target]
+        over = [i for i in range(n_faces) if patches[i] is not None and len(errors[i])
+                and np.nanmax(errors[i], initial=0) > tol * TRIGGER_MARGIN]
         if not over:
             break
         todo = set(over)
@@ -157,10 +163,14 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
 
 
 def _has_zero_area(patch: FacePatch, rel_eps: float = 1e-10) -> bool:
-    """True when a triangle of three distinct nodes has area ≤ rel_eps · (its longest edge)² (a needle)."""
+    """True when a triangle that the weld keeps (three distinct nodes, not two on one B-rep vertex) has
+    area ≤ rel_eps · (its longest edge)² (a needle)."""
     c = patch.nodes[patch.tris]
     t = patch.tris
-    distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])
+    v = patch.node_vertex[t]
+    same_vertex = (((v[:, 0] == v[:, 1]) & (v[:, 0] >= 0)) | ((v[:, 1] == v[:, 2]) & (v[:, 1] >= 0))
+                   | ((v[:, 0] == v[:, 2]) & (v[:, 0] >= 0)))
+    distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
     area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
     longest = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2).max(axis=1)
     return bool((distinct & (area2 <= 2 * rel_eps * longest**2) & (longest > 0)).any())
