@@ -24,7 +24,7 @@ from .tessellate import (
     face_edges,
     run_brepmesh,
 )
-from .weld import weld
+from .weld import orient_stored_shells, weld
 
 ENFORCE_ROUNDS = 4
 #: faces are refined until their sampled error is ≤ this × tolerance: the order-6 grid can miss up to ~0.5 %
@@ -156,7 +156,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
         for i in range(n_faces)
     )
     prog("welding", 0.95)
-    mesh = weld([p for p in patches if p is not None], infos, topo.vertex_roots())
+    mesh = orient_stored_shells(weld([p for p in patches if p is not None], infos, topo.vertex_roots()))
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, fallback, tuple(sorted(set(unmeshed))))

@@ -58,3 +58,29 @@ def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np
         vertex_dim=dim[src], vertex_entity=entity[src].astype(np.int32),
         vertex_param=np.where(dim[src] == ON_BREP_EDGE, param[src], np.nan), faces=faces,
     )
+
+
+def orient_stored_shells(mesh: Mesh) -> Mesh:
+    """Reverse every closed shell made only of stored (tessellated-only) faces whose signed volume is negative:
+    with no surface to orient them, a closed shell's own volume says which side is out."""
+    from .checks import edge_incidence, shell_labels, signed_volume
+
+    stored = np.array([f.meshed_by == "stored" for f in mesh.faces], bool)
+    if mesh.n_triangles == 0 or not stored.any():
+        return mesh
+    n, label = shell_labels(mesh)
+    inc = edge_incidence(mesh.triangles)
+    open_tri = (inc.count[inc.edge_of] != 2).any(axis=1)
+    tris = mesh.triangles.copy()
+    uv = None if mesh.uv is None else mesh.uv.copy()
+    flipped = False
+    for s in range(n):
+        sel = label == s
+        if open_tri[sel].any() or not stored[mesh.face_ids[sel]].all():
+            continue
+        if signed_volume(mesh.corners[sel]) < 0:
+            tris[sel] = tris[sel][:, [0, 2, 1]]
+            if uv is not None:
+                uv[sel] = uv[sel][:, [0, 2, 1]]
+            flipped = True
+    return mesh.with_arrays(triangles=tris, uv=uv) if flipped else mesh

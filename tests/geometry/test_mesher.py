@@ -119,3 +119,21 @@ def test_invalid_parameters(reference_solids, bad):
     with pytest.raises(AmprepError) as err:
         mesh_model(model_from_shape(reference_solids["sphere"]), MeshParams(**bad))
     assert err.value.code == ErrorCode.INVALID_PARAMETER
+
+
+def test_tessellated_only_ap242_keeps_the_files_topology():
+    """FTC-08 has no exact surfaces: its stored triangles share the file's coordinates. The solid's shell comes
+    out closed and outward (it is stored inside-out); the file's one loose face stays open and is reported."""
+    from amprep.geometry.checks import shell_labels, signed_volume
+
+    r = mesh_model(read_cad(corpus("nist_ftc08_tessellated_ap242.stp")), MeshParams(tolerance=0.1))
+    mesh = r.mesh
+    assert all(f.meshed_by == "stored" for f in mesh.faces)
+    assert np.isnan(r.max_error)  # no surface, no chordal error
+    n, label = shell_labels(mesh)
+    sizes = np.bincount(label)
+    main = np.argmax(sizes)
+    assert n == 2 and sizes.min() == 2
+    assert signed_volume(mesh.corners[label == main]) > 0
+    c = check_mesh(mesh)
+    assert c.boundary_edges == 4 and c.nonmanifold_edges == 0 and c.misoriented_edges == 0
