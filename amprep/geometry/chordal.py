@@ -19,14 +19,25 @@ def barycentric_grid(order: int) -> np.ndarray:
     return w
 
 
+def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """(m,) max_i |S(u_i, v_i) − c_i| over the corners: the exact bound of ε_T when S is affine in (u,v) (a plane),
+    since every S(Σ w_i uv_i) − (plane of T) = Σ w_i (S(uv_i) − c_i) · n̂."""
+    exact = evaluate(uv.reshape(-1, 2)).reshape(-1, 3, 3)
+    return np.linalg.norm(exact - corners, axis=2).max(axis=1)
+
+
 def triangle_chordal_error(
     corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray], np.ndarray], order: int = 6,
+    affine: bool = False,
 ) -> np.ndarray:
     """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v);
-    corners (m, 3, 3) mm, uv (m, 3, 2) on the surface `evaluate` ((N, 2) → (N, 3)). Zero-area: 0."""
+    corners (m, 3, 3) mm, uv (m, 3, 2) on the surface `evaluate` ((N, 2) → (N, 3)). Zero-area: 0.
+    affine=True (planes): the corner bound of affine_chordal_bound instead of sampling."""
     m = len(corners)
     if m == 0:
         return np.zeros(0)
+    if affine:
+        return affine_chordal_bound(corners, uv, evaluate)
     w = barycentric_grid(order)
     normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     norm = np.linalg.norm(normal, axis=1)

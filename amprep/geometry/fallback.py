@@ -169,7 +169,8 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     for _ in range(MAX_ROUNDS):
         uv = pts / scale
         xyz = surface.evaluate(uv)
-        err = triangle_chordal_error(xyz[tris], uv[tris], surface.evaluate, order)
+        err = triangle_chordal_error(xyz[tris], uv[tris], surface.evaluate, order,
+                                     affine=surface.surface_type == "plane")
         bad = err > tolerance
         if not bad.any():
             break
