@@ -166,11 +166,25 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         inner = inner[_inside(inner, scaled_loops)]
         pts = np.concatenate([pts, np.unique(inner, axis=0)])
     tris = _cdt(pts, segments, holes)
+    affine = surface.surface_type == "plane"
+    xyz = surface.evaluate(pts / scale)
+    known_code, known_err = np.zeros(0, np.int64), np.zeros(0)
     for _ in range(MAX_ROUNDS):
         uv = pts / scale
-        xyz = surface.evaluate(uv)
-        err = triangle_chordal_error(xyz[tris], uv[tris], surface.evaluate, order,
-                                     affine=surface.surface_type == "plane")
+        if len(xyz) < len(pts):  # points are only ever appended: evaluate the new ones
+            xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
+        code = _triangle_codes(tris, len(pts))
+        err = np.empty(len(tris))
+        seen = np.zeros(len(tris), bool)
+        if code is not None and len(known_code):
+            pos = np.minimum(np.searchsorted(known_code, code), len(known_code) - 1)
+            seen = known_code[pos] == code
+            err[seen] = known_err[pos[seen]]
+        fresh = ~seen
+        err[fresh] = triangle_chordal_error(xyz[tris[fresh]], uv[tris[fresh]], surface.evaluate, order, affine=affine)
+        if code is not None:
+            order_ = np.argsort(code)
+            known_code, known_err = code[order_], err[order_]
         bad = err > tolerance
         if not bad.any():
             break
@@ -179,7 +193,8 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         pts = np.concatenate([pts, new])
         tris = _cdt(pts, segments, holes)
     uv = pts / scale
-    xyz = surface.evaluate(uv)
+    if len(xyz) < len(pts):
+        xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
     k = len(pts)
     if face.Orientation() == TopAbs_REVERSED:
         tris = tris[:, [0, 2, 1]]
@@ -191,6 +206,17 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     node_edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
     node_param[:nb] = np.concatenate([lp["param"] for lp in loops])
     return FacePatch(face_id, xyz, uv, tris, node_vertex, node_edge, node_param, meshed_by="fallback")
+
+
+_CODE_BASE = 1 << 20
+
+
+def _triangle_codes(tris: np.ndarray, n_points: int) -> np.ndarray | None:
+    """(t,) int64 code of each triangle's sorted vertex triple (a·B² + b·B + c), None past 2^20 points."""
+    if n_points >= _CODE_BASE:
+        return None
+    s = np.sort(tris, axis=1).astype(np.int64)
+    return (s[:, 0] * _CODE_BASE + s[:, 1]) * _CODE_BASE + s[:, 2]
 
 
 def _insertion_points(pts: np.ndarray, bad: np.ndarray, seg_code: np.ndarray, base: int) -> np.ndarray:
