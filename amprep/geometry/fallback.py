@@ -10,13 +10,12 @@ from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepTools import BRepTools_WireExplorer
 from OCP.GCPnts import GCPnts_TangentialDeflection
 from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
-from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
 from .chordal import triangle_chordal_error
 from .errors import AmprepError, ErrorCode
 from .surfaces import Surface
-from .tessellate import FacePatch, Topology
+from .tessellate import FacePatch, Topology, explore
 
 MAX_ROUNDS = 40
 
@@ -59,19 +58,10 @@ def split_edge_to_tolerance(edge: TopoDS_Edge, params: np.ndarray, tolerance: fl
     return params
 
 
-def _wires(face: TopoDS_Face) -> list:  # type: ignore[type-arg]
-    out = []
-    exp = TopExp_Explorer(face, TopAbs_WIRE)
-    while exp.More():
-        out.append(TopoDS.Wire_s(exp.Current()))
-        exp.Next()
-    return out
-
-
 def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
     """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,)."""
     loops = []
-    for wire in _wires(face):
+    for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
         uvs, verts, edges, pars = [], [], [], []
         wexp = BRepTools_WireExplorer(wire, face)
         while wexp.More():

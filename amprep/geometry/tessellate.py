@@ -165,14 +165,19 @@ class Topology:
                 self.vertex_index(v2), BRep_Tool.Parameter_s(v2, e))
 
 
-def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
-    """The oriented edges of a face (a seam edge comes twice, once per orientation)."""
+def explore(shape: TopoDS_Shape, kind, cast) -> list:  # type: ignore[no-untyped-def,type-arg]
+    """The sub-shapes of one kind in TopExp order, oriented as they sit in `shape`, cast by `cast`."""
     out = []
-    exp = TopExp_Explorer(face, TopAbs_EDGE)
+    exp = TopExp_Explorer(shape, kind)
     while exp.More():
-        out.append(TopoDS.Edge_s(exp.Current()))
+        out.append(cast(exp.Current()))
         exp.Next()
     return out
+
+
+def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
+    """The oriented edges of a face (a seam edge comes twice, once per orientation)."""
+    return explore(face, TopAbs_EDGE, TopoDS.Edge_s)
 
 
 def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology) -> FacePatch | None:
