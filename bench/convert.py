@@ -133,8 +133,20 @@ def child(tool: str, path: str, tol: float, out: str) -> dict:
         gmsh.finalize()
         res["seconds"] = time.perf_counter() - t
         res["deviation_ratio"] = None
+    res["peak_rss_mb"] = _peak_rss_mb()
     res.update(_mesh_checks(out))
     return res
+
+
+def _peak_rss_mb() -> float:
+    """This process's own peak RSS (VmHWM: per address space, so it starts afresh at exec, unlike ru_maxrss,
+    which Linux carries over from the forking parent)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 # ----------------------------------------------------------------------------------------- parent side
@@ -164,10 +176,10 @@ def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
         with open(Path(tmp) / "result.json", "w+") as sink:
             proc = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True)
             start = time.monotonic()
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            pid, status, _ = os.wait4(proc.pid, os.WNOHANG)
             while pid == 0 and time.monotonic() - start < timeout:
                 time.sleep(0.05)
-                pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+                pid, status, _ = os.wait4(proc.pid, os.WNOHANG)
             if pid == 0:
                 proc.kill()
                 os.wait4(proc.pid, 0)
@@ -175,13 +187,10 @@ def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
             proc.returncode = os.waitstatus_to_exitcode(status)
             sink.seek(0)
             text = sink.read()
-        rss = usage.ru_maxrss / 1024
         try:
-            res = json.loads(text.strip().splitlines()[-1])
+            return json.loads(text.strip().splitlines()[-1])
         except (ValueError, IndexError):
-            return {"error": f"exit {proc.returncode}", "peak_rss_mb": rss}
-        res["peak_rss_mb"] = rss
-        return res
+            return {"error": f"exit {proc.returncode}"}
 
 
 def _diag(path: Path) -> float:
@@ -198,6 +207,7 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=900)
     ap.add_argument("--tools", default=",".join(TOOLS))
     ap.add_argument("--only", default="", help="comma-separated substrings of part names")
+    ap.add_argument("--name", default="bench_convert", help="docs/NAME.md and docs/NAME.csv")
     args = ap.parse_args()
     if args.child:
         tool, path, tol, out = args.child
@@ -222,10 +232,10 @@ def main() -> None:
                 row = {"part": part.stem, "tolerance": tol, "tool": tool, **res}
                 rows.append(row)
                 print(json.dumps(row), flush=True)
-    write_tables(rows)
+    write_tables(rows, args.name, " ".join(sys.argv[1:]))
 
 
-def write_tables(rows: list[dict]) -> None:
+def write_tables(rows: list[dict], name: str = "bench_convert", argv: str = "") -> None:
     docs = ROOT / "docs"
     docs.mkdir(exist_ok=True)
     fields = ["part", "tolerance", "tool", "seconds", "ratio_vs_fastest_occt", "triangles", "closed", "boundary",
@@ -235,7 +245,7 @@ def write_tables(rows: list[dict]) -> None:
                 and o["tool"].startswith("occt-") and "seconds" in o]
         if "seconds" in r and occt:
             r["ratio_vs_fastest_occt"] = r["seconds"] / min(occt)
-    with open(docs / "bench_convert.csv", "w", newline="") as fh:
+    with open(docs / f"{name}.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
@@ -255,8 +265,8 @@ def write_tables(rows: list[dict]) -> None:
             f"{r['boundary']} | {r['nonmanifold']} | {r['degenerate']} | {fmt(r.get('deviation_ratio'), '.2f')} | "
             f"{fmt(r.get('peak_rss_mb'), '.0f')} |")
     table = "\n".join(lines)
-    (docs / "bench_convert.md").write_text(
-        "# Conversion benchmark\n\nMade by `python bench/convert.py` (one child process per cell, end to end: "
+    (docs / f"{name}.md").write_text(
+        f"# Conversion benchmark\n\nMade by `python bench/convert.py {argv}` (one child process per cell, end to end: "
         "read → mesh → write STL; closedness from the written STL with identical-coordinate vertices). "
         "`max dev / tol` is the worst sampled chordal error over all faces divided by the tolerance (n/a for "
         "cascadio and gmsh, whose output carries no (u,v)). gmsh has no chord tolerance: its size comes from "
