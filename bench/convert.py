@@ -1,6 +1,6 @@
 """Conversion benchmark: amprep vs the bare OCCT pipeline (both mesh algorithms), cascadio and gmsh.
 
-Every measurement runs in its own child process (peak RSS from wait4), end to end, file in → STL out.
+Every measurement runs in its own child process (its own peak RSS, VmHWM), end to end, file in → STL out.
 Prints a table and writes docs/bench_convert.md and docs/bench_convert.csv.
 
     python bench/convert.py                   # test parts at 0.1/0.01/0.001, corpus at 0.1/0.01 (+0.001 if small)
