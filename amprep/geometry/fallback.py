@@ -152,9 +152,9 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     cent = pts[tris].mean(axis=1)
     holes = cent[~_inside(cent, scaled_loops)]
     if seeds is not None and len(seeds):
-        inner = seeds * scale
-        inner = inner[_inside(inner, scaled_loops)]
-        pts = np.concatenate([pts, np.unique(inner, axis=0)])
+        # no inside test needed: a seed outside the boundary polygon lies in a hole or concavity that Triangle
+        # eats, so it is left unused
+        pts = np.concatenate([pts, np.unique(seeds * scale, axis=0)])
     tris = _cdt(pts, segments, holes)
     affine = surface.surface_type == "plane"
     xyz = surface.evaluate(pts / scale)
