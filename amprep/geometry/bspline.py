@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 
 def find_span(knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
@@ -33,65 +32,27 @@ def basis_functions(knots: np.ndarray, degree: int, t: np.ndarray, span: np.ndar
     return basis
 
 
-@njit(cache=True, nogil=True)
-def _eval_surface_kernel(pw, uknots, vknots, udeg, vdeg, uv, out):  # pragma: no cover - compiled
-    nu_poles = pw.shape[0]
-    nv_poles = pw.shape[1]
-    bu = np.empty(udeg + 1)
-    bv = np.empty(vdeg + 1)
-    left = np.empty(max(udeg, vdeg) + 1)
-    right = np.empty(max(udeg, vdeg) + 1)
-    for n in range(uv.shape[0]):
-        for d in range(2):
-            t = uv[n, d]
-            knots = uknots if d == 0 else vknots
-            deg = udeg if d == 0 else vdeg
-            basis = bu if d == 0 else bv
-            n_poles = nu_poles if d == 0 else nv_poles
-            lo, hi = deg, n_poles  # span: knots[span] <= t < knots[span + 1], clamped to [deg, n_poles - 1]
-            if t >= knots[n_poles]:
-                span = n_poles - 1
-            elif t <= knots[deg]:
-                span = deg
-            else:
-                while hi - lo > 1:
-                    mid = (lo + hi) // 2
-                    if knots[mid] <= t:
-                        lo = mid
-                    else:
-                        hi = mid
-                span = lo
-            basis[0] = 1.0
-            for j in range(1, deg + 1):
-                left[j] = t - knots[span + 1 - j]
-                right[j] = knots[span + j] - t
-                saved = 0.0
-                for r in range(j):
-                    denom = right[r + 1] + left[j - r]
-                    temp = basis[r] / denom if denom != 0.0 else 0.0
-                    basis[r] = saved + right[r + 1] * temp
-                    saved = left[j - r] * temp
-                basis[j] = saved
-            if d == 0:
-                su = span
-            else:
-                sv = span
-        x = 0.0
-        y = 0.0
-        z = 0.0
-        w = 0.0
-        for a in range(udeg + 1):
-            for b in range(vdeg + 1):
-                c = bu[a] * bv[b]
-                i = su - udeg + a
-                j = sv - vdeg + b
-                x += c * pw[i, j, 0]
-                y += c * pw[i, j, 1]
-                z += c * pw[i, j, 2]
-                w += c * pw[i, j, 3]
-        out[n, 0] = x / w
-        out[n, 1] = y / w
-        out[n, 2] = z / w
+COMPILED_MIN_POINTS = 100_000
+_kernel = None
+_CHUNK = 65536
+
+
+def _eval_surface_numpy(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, udeg: int, vdeg: int,
+                        uv: np.ndarray) -> np.ndarray:
+    """(N, 3) the same sum in numpy: spans by searchsorted, basis by basis_functions, one batched matmul."""
+    out = np.empty((len(uv), 3))
+    a = np.arange(udeg + 1)[None, :, None]
+    b = np.arange(vdeg + 1)[None, None, :]
+    for s in range(0, len(uv), _CHUNK):
+        u, v = uv[s:s + _CHUNK, 0], uv[s:s + _CHUNK, 1]
+        su, sv = find_span(uknots, udeg, u), find_span(vknots, vdeg, v)
+        nu, nv = basis_functions(uknots, udeg, u, su), basis_functions(vknots, vdeg, v, sv)
+        flat = ((su - udeg)[:, None, None] + a) * pw.shape[1] + ((sv - vdeg)[:, None, None] + b)
+        block = pw.reshape(-1, 4)[flat.reshape(len(u), -1)]  # (n, (p+1)(q+1), 4)
+        basis = (nu[:, :, None] * nv[:, None, :]).reshape(len(u), 1, -1)  # (n, 1, (p+1)(q+1))
+        h = np.matmul(basis, block)[:, 0]  # (n, 4)
+        out[s:s + _CHUNK] = h[:, :3] / h[:, 3:4]
+    return out
 
 
 def eval_surface(
@@ -100,10 +61,18 @@ def eval_surface(
 ) -> np.ndarray:
     """(N, 3) S(u,v) = Σ N_i(u) N_j(v) w_ij P_ij / Σ N_i(u) N_j(v) w_ij; poles (nu, nv, 3), weights (nu, nv).
 
-    Compiled with numba: span by bisection, Cox–de Boor basis (Piegl–Tiller A2.2), weighted sum, per point."""
+    Calls of ≥ COMPILED_MIN_POINTS points (and every call once the kernel is loaded) run the numba kernel of
+    _bspline_kernel.py; smaller ones run numpy, so a small part never pays numba's ~0.7 s start-up."""
+    global _kernel
     pw = np.ascontiguousarray(np.concatenate([poles * weights[..., None], weights[..., None]], axis=2))
+    if _kernel is None and len(uv) < COMPILED_MIN_POINTS:
+        return _eval_surface_numpy(pw, uknots, vknots, udeg, vdeg, np.asarray(uv, dtype=np.float64))
+    if _kernel is None:
+        from ._bspline_kernel import eval_surface_kernel
+
+        _kernel = eval_surface_kernel
     out = np.empty((len(uv), 3))
-    _eval_surface_kernel(pw, np.ascontiguousarray(uknots, dtype=np.float64),
+    _kernel(pw, np.ascontiguousarray(uknots, dtype=np.float64),
                          np.ascontiguousarray(vknots, dtype=np.float64), int(udeg), int(vdeg),
                          np.ascontiguousarray(uv, dtype=np.float64), out)
     return out
