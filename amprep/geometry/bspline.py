@@ -77,12 +77,3 @@ def eval_surface(
                          np.ascontiguousarray(uv, dtype=np.float64), out)
     return out
 
-
-def eval_curve(poles: np.ndarray, weights: np.ndarray, knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
-    """(N, d) C(t) = Σ N_i(t) w_i P_i / Σ N_i(t) w_i; poles (n, d), weights (n,)."""
-    pw = np.concatenate([poles * weights[:, None], weights[:, None]], axis=1)
-    span = find_span(knots, degree, t)
-    nb = basis_functions(knots, degree, t, span)
-    block = pw[(span - degree)[:, None] + np.arange(degree + 1)[None, :]]  # (N, p+1, d+1)
-    h = np.einsum("na,nak->nk", nb, block)
-    return h[:, :-1] / h[:, -1:]

@@ -87,13 +87,3 @@ class Mesh:
         """(k,) int64 indices of the triangles of one CAD face."""
         return np.flatnonzero(self.face_ids == face_id)
 
-
-def concatenate(meshes: list[Mesh]) -> Mesh:
-    """One mesh holding all of `meshes` (vertex indices offset; no vertex is shared between them)."""
-    if not meshes:
-        return Mesh.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
-    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
-    return Mesh.from_arrays(
-        np.concatenate([m.vertices for m in meshes]),
-        np.concatenate([m.triangles + o for m, o in zip(meshes, offsets, strict=False)]),
-    )

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from .errors import AmprepError, ErrorCode
-
 #: progress(stage, fraction in [0, 1]); may raise to cancel.
 ProgressFn = Callable[[str, float], None]
 
@@ -28,7 +26,3 @@ class Progress:
         width = self._end - self._start
         return Progress(self._fn, self._start + width * start, self._start + width * end)
 
-
-def cancelled() -> AmprepError:
-    """The error raised when a progress callback asks to stop."""
-    return AmprepError(ErrorCode.CANCELLED, "the job was cancelled")
