@@ -72,8 +72,7 @@ def eval_surface(
 
         _kernel = eval_surface_kernel
     out = np.empty((len(uv), 3))
-    _kernel(pw, np.ascontiguousarray(uknots, dtype=np.float64),
-                         np.ascontiguousarray(vknots, dtype=np.float64), int(udeg), int(vdeg),
-                         np.ascontiguousarray(uv, dtype=np.float64), out)
+    _kernel(pw, np.ascontiguousarray(uknots, dtype=np.float64), np.ascontiguousarray(vknots, dtype=np.float64),
+            int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
     return out
 

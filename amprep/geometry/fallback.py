@@ -156,8 +156,9 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         # eats, so it is left unused
         pts = np.concatenate([pts, np.unique(seeds * scale, axis=0)])
     tris = _cdt(pts, segments, holes)
-    affine = surface.surface_type == "plane"
+    affine = surface.affine
     xyz = surface.evaluate(pts / scale)
+    final_err = None
     known_code, known_err = np.zeros(0, np.int64), np.zeros(0)
     for _ in range(MAX_ROUNDS):
         uv = pts / scale
@@ -177,6 +178,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
             known_code, known_err = code[order_], err[order_]
         bad = err > tolerance
         if not bad.any():
+            final_err = err
             break
         seg_code = np.sort(segments.min(axis=1) * (len(pts) + 1) + segments.max(axis=1))
         new = _insertion_points(pts, tris[bad], seg_code, len(pts) + 1)
@@ -185,6 +187,8 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     uv = pts / scale
     if len(xyz) < len(pts):
         xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
+    if final_err is None:  # rounds ran out after a last insertion: measure the triangles kept
+        final_err = triangle_chordal_error(xyz[tris], uv[tris], surface.evaluate, order, affine=affine)
     k = len(pts)
     if face.Orientation() == TopAbs_REVERSED:
         tris = tris[:, [0, 2, 1]]
@@ -195,7 +199,8 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     node_vertex[:nb] = np.concatenate([lp["vertex"] for lp in loops])
     node_edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
     node_param[:nb] = np.concatenate([lp["param"] for lp in loops])
-    return FacePatch(face_id, xyz, uv, tris, node_vertex, node_edge, node_param, meshed_by="fallback")
+    return FacePatch(face_id, xyz, uv, tris, node_vertex, node_edge, node_param, meshed_by="fallback",
+                     error=final_err)
 
 
 _CODE_BASE = 1 << 20

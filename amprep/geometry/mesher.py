@@ -75,8 +75,10 @@ def patch_error(patch: FacePatch, surface: Surface | None, order: int) -> np.nda
     """(t,) chordal error of each triangle of a patch (nan when the face has no surface or no (u,v))."""
     if surface is None or patch.uv is None or patch.meshed_by == "stored":
         return np.full(len(patch.tris), np.nan)
+    if patch.error is not None:  # the fallback mesher measured its own triangles
+        return patch.error
     return triangle_chordal_error(patch.nodes[patch.tris], patch.uv[patch.tris], surface.evaluate, order,
-                                  affine=surface.surface_type == "plane")
+                                  affine=surface.affine)
 
 
 def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> MeshResult:

@@ -50,6 +50,11 @@ class Surface:
     exact_numpy: bool = True
     data: dict | None = None
 
+    @property
+    def affine(self) -> bool:
+        """True when S is affine in (u,v) (a plane): chordal error then has an exact corner bound."""
+        return self.surface_type == "plane"
+
 
 def plane(o: np.ndarray, x: np.ndarray, y: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
     """S(u,v) = O + u·X + v·Y."""

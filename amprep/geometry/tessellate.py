@@ -104,7 +104,7 @@ class FacePatch:
 
     nodes (k, 3) world mm · uv (k, 2) · tris (t, 3) local indices, oriented outward ·
     node_vertex (k,) B-rep vertex index or −1 · node_edge (k,) B-rep edge index or −1 ·
-    node_param (k,) parameter on that edge.
+    node_param (k,) parameter on that edge · error (t,) chordal error per triangle, when already measured.
     """
 
     face_id: int
@@ -115,6 +115,7 @@ class FacePatch:
     node_edge: np.ndarray
     node_param: np.ndarray
     meshed_by: str = "occt"
+    error: np.ndarray | None = None  # (t,) chordal error per triangle when the mesher already measured it
 
 
 @dataclass
