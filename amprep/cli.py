@@ -1,4 +1,4 @@
-"""`amprep` command line: convert (local). Errors print one line with their stable code, exit status 2."""
+"""`amprep` command line: convert (local), serve, submit (HTTP client), key. Errors print one line with their stable code, exit status 2."""
 
 from __future__ import annotations
 
@@ -81,6 +81,78 @@ def cmd_convert(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_serve(args: argparse.Namespace) -> int:
+    import os
+    from pathlib import Path
+
+    from .logs import setup_logging
+    from .serve import serve
+
+    setup_logging()
+    return serve(args.host, args.port, args.workers, Path(args.data), args.redis_url or os.environ.get("AMPREP_REDIS_URL"))
+
+
+def _param_value(text: str) -> object:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def cmd_submit(args: argparse.Namespace) -> int:
+    import os
+    from pathlib import Path
+
+    from .client import Client, main_artifact
+
+    params = json.loads(args.params) if args.params else {}
+    for item in args.param or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, f"-p takes key=value, got '{item}'")
+        params[key.replace("-", "_")] = _param_value(value)
+    client = Client(args.server, args.api_key or os.environ.get("AMPREP_API_KEY"))
+    job = client.submit(Path(args.input), args.kind, params, Path(args.stl) if args.stl else None, args.idempotency_key)
+    if args.wait or args.output:
+        update, close = _progress_bar(args.quiet)
+        try:
+            job = client.follow(job["id"], (lambda j: update(j["stage"], j["progress"])) if update else None)
+        finally:
+            close()
+    if args.output and job["status"] == "succeeded":
+        name = main_artifact(job)
+        if name is None:
+            raise AmprepError(ErrorCode.NOT_FOUND, f"job {job['id']} has no main artifact to write")
+        client.download(job, name, Path(args.output))
+    if not args.quiet or job["status"] not in ("queued", "running", "succeeded"):
+        print(json.dumps(job, indent=2) if args.json else _job_line(job))
+    if job["status"] in ("failed", "cancelled"):
+        err = job.get("error") or {}
+        print(f"amprep: error [{err.get('code', 'cancelled')}]: {err.get('message', '')}", file=sys.stderr)
+        return EXIT_ERROR
+    return 0
+
+
+def _job_line(job: dict) -> str:  # type: ignore[type-arg]
+    line = f"job {job['id']} {job['kind']} {job['status']}"
+    if job.get("reused_from"):
+        line += f" (reused the result of {job['reused_from']})"
+    for a in job.get("artifacts", []):
+        line += f"\n  {a['name']}  {a['size']:,} bytes  {a['url']}"
+    return line
+
+
+def cmd_key(args: argparse.Namespace) -> int:
+    import secrets
+
+    from .settings import hash_key
+
+    key = "amp_" + secrets.token_urlsafe(32)
+    print(f"key (give to the client, shown once): {key}")
+    print(f"sha256 (add to AMPREP_API_KEYS on the server): {hash_key(key)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="amprep", description="CAD to print-ready STL, with numbers.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -97,12 +169,39 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--report", help="write a JSON summary here")
     c.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
     c.set_defaults(func=cmd_convert)
+
+    sv = sub.add_parser("serve", help="run the service on this machine: private Redis, workers and the API")
+    sv.add_argument("--host", default="127.0.0.1", help="address to bind (not loopback: API keys required)")
+    sv.add_argument("--port", type=int, default=8000)
+    sv.add_argument("--workers", type=int, default=2, help="worker processes for convert/analyze (refine: half)")
+    sv.add_argument("--data", default="amprep-data", help="jobs, artifacts and Redis's append-only file")
+    sv.add_argument("--redis-url", help="use this Redis instead of a private one (default: $AMPREP_REDIS_URL)")
+    sv.set_defaults(func=cmd_serve)
+
+    sb = sub.add_parser("submit", help="send a file to an amprep server and (with --wait or -o) wait for the result")
+    sb.add_argument("input")
+    sb.add_argument("--kind", choices=["convert", "analyze", "refine"], required=True)
+    sb.add_argument("--stl", help="an STL made elsewhere, scored or refined against INPUT")
+    sb.add_argument("--server", default="http://127.0.0.1:8000")
+    sb.add_argument("--api-key", help="default: $AMPREP_API_KEY")
+    sb.add_argument("--params", help="JSON object of the kind's params")
+    sb.add_argument("-p", "--param", action="append", help="one param as key=value (value read as JSON if it parses)")
+    sb.add_argument("--idempotency-key")
+    sb.add_argument("--wait", action="store_true", help="follow the job to its end")
+    sb.add_argument("-o", "--output", help="write the main artifact here (implies --wait)")
+    sb.add_argument("--json", action="store_true", help="print the job as JSON")
+    sb.add_argument("--quiet", action="store_true")
+    sb.set_defaults(func=cmd_submit)
+
+    k = sub.add_parser("key", help="make an API key and the sha256 digest the server is configured with")
+    k.set_defaults(func=cmd_key)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    _quiet_occt()
+    if args.command == "convert":
+        _quiet_occt()
     try:
         return int(args.func(args))
     except AmprepError as exc:

@@ -16,6 +16,18 @@ class ErrorCode(StrEnum):
     MESHING_FAILED = "meshing_failed"
     WRITE_FAILED = "write_failed"
     CANCELLED = "cancelled"
+    NOT_IMPLEMENTED = "not_implemented"
+    # Raised by the service around the library (jobs and HTTP), listed here so there is one enum of codes.
+    WORKER_CRASHED = "worker_crashed"
+    TIME_LIMIT = "time_limit"
+    INTERNAL_ERROR = "internal_error"
+    INVALID_REQUEST = "invalid_request"
+    NOT_FOUND = "not_found"
+    UNAUTHORIZED = "unauthorized"
+    UPLOAD_TOO_LARGE = "upload_too_large"
+    NOT_ACCEPTABLE = "not_acceptable"
+    CONFLICT = "conflict"
+    UNAVAILABLE = "unavailable"
 
 
 class AmprepError(Exception):

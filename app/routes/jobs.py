@@ -1,0 +1,220 @@
+"""/v1/jobs: create (upload), read, list, cancel/delete, artifacts and server-sent events."""
+
+from __future__ import annotations
+
+import base64
+import json
+from typing import Annotated, Any
+
+from fastapi import APIRouter, File, Form, Header, Query, Request, UploadFile
+from fastapi.responses import FileResponse, JSONResponse, Response
+from pydantic import ValidationError
+from sse_starlette.sse import EventSourceResponse
+
+from amprep.geometry.errors import ErrorCode
+from amprep.queue import CALLBACK_TASK, TASK_OF_KIND
+from amprep.store import TERMINAL, Job, fingerprint, new_job_id, now
+
+from ..deps import CeleryDep, OwnerDep, StoreDep
+from ..events import job_updates, wait_for_end
+from ..models import PARAMS_MODEL, JobList, JobPublic, Kind, Problem, Status
+from ..problems import ApiError, problem
+from ..uploads import require_cad, require_stl, sniff, store_upload
+
+router = APIRouter(prefix="/v1", tags=["jobs"])
+
+PROBLEMS: dict[int | str, dict[str, Any]] = {
+    s: {"model": Problem, "content": {"application/problem+json": {}}, "description": d}
+    for s, d in [(401, "Missing or invalid API key"), (404, "No such job (or not yours)"),
+                 (422, "Invalid request or input: see `code`")]
+}
+JOB_EXAMPLE = JobPublic.model_config["json_schema_extra"]["examples"][0]  # type: ignore[index]
+
+
+def _job_response(job: Job, request: Request, status_code: int | None = None) -> Response:
+    """The job JSON (200 when it has ended, else 202); or its STL when asked with Accept: model/stl."""
+    if "model/stl" in request.headers.get("accept", "") and job.status in TERMINAL:
+        if job.status != "succeeded":
+            err = job.error or {"code": ErrorCode.CANCELLED.value, "message": "the job was cancelled"}
+            return problem(422, err["code"], err["message"], request.url.path, job_id=job.id)
+        stl = next((a for a in job.artifacts if a["media_type"] == "model/stl"), None)
+        if stl is None:
+            return problem(406, ErrorCode.NOT_ACCEPTABLE.value, "this job has no STL artifact", request.url.path, job_id=job.id)
+        return FileResponse(request.app.state.store.artifact_path(job.id, stl["name"]), media_type="model/stl",
+                            filename=stl["name"], headers={"X-Amprep-Job": job.id})
+    code = status_code or (200 if job.status in TERMINAL else 202)
+    return JSONResponse(job.public(), status_code=code, headers={"Location": f"/v1/jobs/{job.id}"})
+
+
+def _own(store: Any, job_id: str, owner: str) -> Job:
+    job = store.get(job_id)
+    if job is None or job.owner != owner:
+        raise ApiError(404, ErrorCode.NOT_FOUND, f"no job {job_id}")
+    return job
+
+
+def _params(kind: str, raw: str) -> dict[str, Any]:
+    try:
+        data = json.loads(raw or "{}")
+    except json.JSONDecodeError as exc:
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, f"params: not JSON ({exc.msg})") from None
+    if not isinstance(data, dict):
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, "params: must be a JSON object")
+    try:
+        return PARAMS_MODEL[kind].model_validate(data).model_dump(mode="json")
+    except ValidationError as exc:
+        errors = [{"loc": ["params", *e["loc"]], "msg": e["msg"], "type": e["type"]} for e in exc.errors()]
+        first = errors[0]
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, f"{'.'.join(map(str, first['loc']))}: {first['msg']}",
+                       errors=errors) from None
+
+
+@router.post(
+    "/jobs", operation_id="create_job", status_code=202, summary="Submit a file for convert, analyze or refine",
+    responses={200: {"model": JobPublic, "description": "The job ended within ?wait (or an idempotent repeat of "
+                     "an ended job); with Accept: model/stl, the STL itself",
+                     "content": {"model/stl": {}, "application/json": {"example": JOB_EXAMPLE}}},
+               202: {"model": JobPublic, "description": "Queued (or still running when ?wait ran out)"},
+               409: PROBLEMS[422] | {"description": "Idempotency-Key reused with a different request"},
+               413: PROBLEMS[422] | {"description": "Upload over the size limit (code upload_too_large)"},
+               **PROBLEMS})
+async def create_job(
+    request: Request, store: StoreDep, celery: CeleryDep, owner: OwnerDep,
+    file: Annotated[UploadFile, File(description="STEP, IGES, BREP or STL (recognised from its bytes)")],
+    kind: Annotated[Kind, Form(description="convert | analyze | refine")],
+    params: Annotated[str, Form(description="JSON object of the kind's params (unknown keys are an error)",
+                                examples=['{"tolerance": 0.05}'])] = "{}",
+    stl: Annotated[UploadFile | None, File(description="An STL made elsewhere, scored/refined against `file`")] = None,
+    wait: Annotated[float, Query(ge=0, le=3600, description="Hold the request up to this many seconds for the end")] = 0,
+    idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", max_length=255,
+                                                  description="The same key returns the same job")] = None,
+) -> Response:
+    p = _params(kind, params)
+    info = {"file": await sniff(file, "file")}
+    if stl is not None:
+        info["stl"] = await sniff(stl, "stl")
+        require_stl(info["stl"])
+        require_cad(info["file"])
+    job_id = new_job_id()
+    if idempotency_key:
+        request_fp = fingerprint(kind, f"{info['file']['name']}:{info['file']['size']}", "", p)
+        earlier = store.claim_idempotency(owner, idempotency_key, job_id)
+        if earlier and (old := store.get(earlier)) is not None:
+            if old.input.get("request") != request_fp:
+                raise ApiError(409, ErrorCode.CONFLICT, "Idempotency-Key already used for a different request")
+            request.state.job_id = old.id
+            return await _respond(request, store, old, wait, owner)
+        info["request"] = request_fp
+    job_dir = store.job_dir(job_id) / "input"
+    info["file"] = await store_upload(file, info["file"], job_dir, "model")
+    if stl is not None:
+        info["stl"] = await store_upload(stl, info["stl"], job_dir, "user")
+    info["fingerprint"] = fingerprint(kind, info["file"]["sha256"], info.get("stl", {}).get("sha256", ""), p)
+    job = Job(id=job_id, kind=kind, owner=owner, params=p, input=info, idempotency_key=idempotency_key)
+    request.state.job_id = job_id
+    earlier_result = store.reusable(info["fingerprint"], owner) if p["reuse"] else None
+    if earlier_result is not None:
+        store.copy_artifacts(earlier_result, job_id)
+        t = now()
+        job.status, job.progress, job.stage = "succeeded", 1.0, "reused"
+        job.artifacts, job.result, job.provenance = earlier_result.artifacts, earlier_result.result, earlier_result.provenance
+        job.reused_from, job.created_at, job.started_at, job.finished_at = earlier_result.id, t, t, t
+        store.create(job)
+        if p.get("callback_url"):
+            celery.send_task(CALLBACK_TASK, args=[job_id])
+        return _job_response(job, request)
+    store.create(job)
+    try:
+        celery.send_task(TASK_OF_KIND[kind], args=[job_id], task_id=job_id)
+    except Exception as exc:  # the broker is down: the job cannot run
+        store.transition(job_id, ("queued",), status="failed", finished_at=now(),
+                         error={"code": ErrorCode.UNAVAILABLE.value, "message": "the queue is unreachable"})
+        raise ApiError(503, ErrorCode.UNAVAILABLE, f"the queue is unreachable: {type(exc).__name__}") from None
+    return await _respond(request, store, job, wait, owner)
+
+
+async def _respond(request: Request, store: Any, job: Job, wait: float, owner: str) -> Response:
+    if wait > 0 and job.status not in TERMINAL:
+        job = await wait_for_end(request.app.state.aredis, store, job.id, wait, owner) or job
+    return _job_response(job, request)
+
+
+@router.get("/jobs/{job_id}", operation_id="get_job", response_model=JobPublic, summary="A job's status and results",
+            responses={200: {"content": {"model/stl": {}}, "description": "The job; with Accept: model/stl and a "
+                             "finished convert job, its STL"}, **PROBLEMS})
+async def get_job(job_id: str, request: Request, store: StoreDep, owner: OwnerDep) -> Response:
+    request.state.job_id = job_id
+    return _job_response(_own(store, job_id, owner), request, status_code=200)
+
+
+def _cursor_decode(cursor: str | None) -> float | None:
+    if not cursor:
+        return None
+    try:
+        return float(base64.urlsafe_b64decode(cursor.encode()).decode())
+    except Exception:
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, "cursor: not a cursor this server gave") from None
+
+
+@router.get("/jobs", operation_id="list_jobs", response_model=JobList, summary="Your jobs, newest first",
+            responses=PROBLEMS)
+async def list_jobs(store: StoreDep, owner: OwnerDep, status: Status | None = None, kind: Kind | None = None,
+                    cursor: Annotated[str | None, Query(description="next_cursor of the previous page")] = None,
+                    limit: Annotated[int, Query(ge=1, le=200)] = 50) -> JobList:
+    jobs, nxt = store.list(owner, status, kind, _cursor_decode(cursor), limit)
+    next_cursor = base64.urlsafe_b64encode(repr(nxt).encode()).decode() if nxt is not None else None
+    return JobList(jobs=[JobPublic.model_validate(j.public()) for j in jobs], next_cursor=next_cursor)
+
+
+@router.delete("/jobs/{job_id}", operation_id="delete_job", summary="Cancel a queued or running job, or delete "
+               "a finished one and its files",
+               responses={200: {"model": JobPublic, "description": "Cancelled (the worker stops at its next step)"},
+                          204: {"description": "Deleted"}, **PROBLEMS})
+async def delete_job(job_id: str, request: Request, store: StoreDep, celery: CeleryDep, owner: OwnerDep) -> Response:
+    request.state.job_id = job_id
+    job = _own(store, job_id, owner)
+    if job.status not in TERMINAL:
+        cancelled = store.transition(job_id, ("queued", "running"), status="cancelled", finished_at=now(),
+                                     stage="cancelled", error={"code": ErrorCode.CANCELLED.value,
+                                                               "message": "cancelled by the client"})
+        if cancelled is not None:
+            if cancelled.params.get("callback_url"):
+                celery.send_task(CALLBACK_TASK, args=[job_id])
+            return JSONResponse(cancelled.public())
+        job = _own(store, job_id, owner)  # it ended meanwhile: delete it below
+    store.delete(job)
+    return Response(status_code=204)
+
+
+@router.get("/jobs/{job_id}/artifacts/{name}", operation_id="get_artifact", summary="Download an artifact",
+            response_class=FileResponse,
+            responses={200: {"content": {"model/stl": {}, "model/3mf": {}, "application/json": {}, "image/png": {}},
+                             "description": "The file"}, **PROBLEMS})
+async def get_artifact(job_id: str, name: str, request: Request, store: StoreDep, owner: OwnerDep) -> Response:
+    request.state.job_id = job_id
+    job = _own(store, job_id, owner)
+    art = next((a for a in job.artifacts if a["name"] == name), None)
+    if art is None:
+        raise ApiError(404, ErrorCode.NOT_FOUND, f"job {job_id} has no artifact '{name}'")
+    return FileResponse(store.artifact_path(job_id, name), media_type=art["media_type"], filename=name,
+                        headers={"X-Amprep-Sha256": art["sha256"]})
+
+
+@router.get("/jobs/{job_id}/events", operation_id="job_events", summary="Server-sent events: the job on every change",
+            response_class=EventSourceResponse,
+            responses={200: {"content": {"text/event-stream": {}}, "description": "`event: job` with the job JSON "
+                             "on every change; the stream ends when the job does"}, **PROBLEMS})
+async def job_events(job_id: str, request: Request, store: StoreDep, owner: OwnerDep) -> EventSourceResponse:
+    request.state.job_id = job_id
+    _own(store, job_id, owner)
+    aredis = request.app.state.aredis
+
+    async def stream():  # type: ignore[no-untyped-def]
+        last = None
+        async for job in job_updates(aredis, store, job_id, None, owner):
+            key = (job.status, job.progress, job.stage)
+            if key != last:
+                last = key
+                yield {"event": "job", "id": f"{job.status}:{job.progress}", "data": json.dumps(job.public())}
+
+    return EventSourceResponse(stream(), ping=10)

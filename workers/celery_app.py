@@ -1,0 +1,22 @@
+"""The worker's Celery app: `celery -A workers.celery_app worker -Q quick,heavy,callbacks`."""
+
+from __future__ import annotations
+
+from celery import signals
+
+from amprep.logs import setup_logging
+from amprep.queue import make_celery
+
+app = make_celery()
+app.conf.include = ["workers.tasks"]
+
+
+@signals.setup_logging.connect
+def _json_logs(**_: object) -> None:
+    setup_logging()
+
+
+@signals.worker_init.connect
+def _preload(**_: object) -> None:
+    """Import OCCT and the geometry library once in the parent, so each fresh child process starts warm."""
+    import amprep.geometry.convert  # noqa: F401
