@@ -17,6 +17,7 @@ from amprep.settings import Settings, get_settings
 from amprep.store import JobStore
 
 from . import problems
+from .limits import UploadLimit
 from .metrics import StoreCollector
 from .routes import health, jobs
 
@@ -79,7 +80,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                                 {"name": "health", "description": "Liveness, readiness and metrics"}])
     problems.install(app)
     app.include_router(health.router)
-    app.include_router(jobs.router, max_body_size=s.max_upload_bytes)
+    app.include_router(jobs.router)
+    app.add_middleware(UploadLimit, limit=s.max_upload_bytes)
     app.add_middleware(AccessLog)
     return app
 

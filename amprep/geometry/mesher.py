@@ -96,6 +96,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     patches: list[FacePatch | None] = []
     fallback: dict[int, str] = {}
     for i, face in enumerate(model.faces):
+        prog("meshing", 0.4 + 0.1 * i / max(n_faces, 1))
         p = None if params.force_fallback else extract_patch(i, face, topo)
         if p is None:
             fallback[i] = "forced" if params.force_fallback else "no_triangulation"
@@ -115,7 +116,9 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     errors: list[np.ndarray] = [np.zeros(0)] * n_faces
     unmeshed: list[int] = []
     for round_ in range(ENFORCE_ROUNDS + 1):
-        for i in sorted(todo):
+        stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
+        for k, i in enumerate(sorted(todo)):
+            stage("re-meshing faces", 0.5 * k / max(len(todo), 1))
             surf = surfaces[i]
             if surf is None:
                 continue
@@ -130,6 +133,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                 patches[i] = None
                 unmeshed.append(i)
         for i in range(n_faces):
+            stage("measuring chordal error", 0.5 + 0.5 * i / n_faces)
             if patches[i] is not None and (round_ == 0 or i in todo):
                 errors[i] = patch_error(patches[i], surfaces[i], params.sample_order)
         if not params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
@@ -152,7 +156,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                     todo |= _faces_of_edge(model, topo, ei)
         for i in todo:
             fallback.setdefault(i, "tolerance")
-        prog("enforcing tolerance", min(1.0, 0.5 + 0.1 * (round_ + 1)))
+        prog("enforcing tolerance", 0.5 + 0.08 * (round_ + 1))
     infos = tuple(
         FaceInfo(i, surfaces[i].surface_type if surfaces[i] is not None else "none", model.face_solid[i],
                  patches[i].meshed_by if patches[i] is not None else "none")
