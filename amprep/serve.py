@@ -154,9 +154,11 @@ def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None 
     check_bind(host, bool(settings.api_keys), settings.allow_insecure_bind)
     data = data.resolve()
     data.mkdir(parents=True, exist_ok=True)
-    redis_proc = None
+    redis_proc, origin = None, "external"
     if redis_url is None:
-        redis_proc, redis_url = start_redis(data)
+        exe, origin = redis_server_binary()
+        redis_proc, redis_url = start_redis(data, exe)
+        origin = f"private redis-server from {origin}"
     env = dict(os.environ, AMPREP_REDIS_URL=redis_url, AMPREP_DATA_DIR=str(data), PYTHONUNBUFFERED="1")
     sup = Supervisor(env)
     stopping = []
@@ -172,7 +174,9 @@ def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None 
                           "--no-access-log", "--log-level", "warning", "--timeout-graceful-shutdown", "5"])
         base = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
         if wait_http(base + "/healthz"):
-            echo(f"amprep serving on http://{host}:{port}  (data {data}, redis {redis_url}, {workers} worker(s))")
+            echo(f"amprep serving on http://{host}:{port}  (data {data}; {origin} at {redis_url}; {workers} worker(s))")
+        else:
+            echo("amprep: the API did not answer within 60 s; see the log above")
         while not stopping:
             time.sleep(0.2)
             sup.watch()

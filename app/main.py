@@ -57,6 +57,25 @@ class AccessLog:
                 "job_id": scope.get("state", {}).get("job_id")})
 
 
+def _openapi(app: FastAPI) -> dict:  # type: ignore[type-arg]
+    """The generated schema plus the per-kind params models (the `params` form field is a JSON string)."""
+    from fastapi.openapi.utils import get_openapi
+
+    from .models import PARAMS_MODEL
+
+    if app.openapi_schema is None:
+        spec = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes,
+                           tags=app.openapi_tags)
+        schemas = spec.setdefault("components", {}).setdefault("schemas", {})
+        for kind, model in PARAMS_MODEL.items():
+            schema = model.model_json_schema(ref_template="#/components/schemas/{model}")
+            schemas.update(schema.pop("$defs", {}))
+            schemas[model.__name__] = schema
+        spec["x-params-by-kind"] = {k: f"#/components/schemas/{m.__name__}" for k, m in PARAMS_MODEL.items()}
+        app.openapi_schema = spec
+    return app.openapi_schema
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The API on the given settings (default: from the AMPREP_* environment)."""
     s = settings or get_settings()
@@ -79,6 +98,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   openapi_tags=[{"name": "jobs", "description": "Convert, analyze and refine jobs"},
                                 {"name": "health", "description": "Liveness, readiness and metrics"}])
     problems.install(app)
+    app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     app.include_router(health.router)
     app.include_router(jobs.router)
     app.add_middleware(UploadLimit, limit=s.max_upload_bytes)

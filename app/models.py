@@ -118,12 +118,18 @@ class JobPublic(BaseModel):
 
 
 class JobList(BaseModel):
+    """One page of jobs, newest first."""
+
     jobs: list[JobPublic]
     next_cursor: str | None = Field(description="Pass as ?cursor= for the next page; null on the last page")
 
 
 class Problem(BaseModel):
     """RFC 9457 problem details with a stable `code`."""
+
+    model_config = ConfigDict(json_schema_extra={"examples": [{
+        "type": "about:blank", "title": "Unprocessable Entity", "status": 422, "code": "invalid_request",
+        "detail": "params.bogus: Extra inputs are not permitted", "instance": "/v1/jobs"}]})
 
     type: str = Field("about:blank")
     title: str

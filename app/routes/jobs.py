@@ -82,7 +82,8 @@ async def create_job(
     request: Request, store: StoreDep, celery: CeleryDep, owner: OwnerDep,
     file: Annotated[UploadFile, File(description="STEP, IGES, BREP or STL (recognised from its bytes)")],
     kind: Annotated[Kind, Form(description="convert | analyze | refine")],
-    params: Annotated[str, Form(description="JSON object of the kind's params (unknown keys are an error)",
+    params: Annotated[str, Form(description="JSON object of the kind's params (unknown keys are an error): "
+                                "ConvertParams, AnalyzeParams or RefineParams",
                                 examples=['{"tolerance": 0.05}'])] = "{}",
     stl: Annotated[UploadFile | None, File(description="An STL made elsewhere, scored/refined against `file`")] = None,
     wait: Annotated[float, Query(ge=0, le=3600, description="Hold the request up to this many seconds for the end")] = 0,
