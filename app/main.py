@@ -67,7 +67,7 @@ def _openapi(app: FastAPI) -> dict:  # type: ignore[type-arg]
         spec = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes,
                            tags=app.openapi_tags)
         schemas = spec.setdefault("components", {}).setdefault("schemas", {})
-        for kind, model in PARAMS_MODEL.items():
+        for model in PARAMS_MODEL.values():
             schema = model.model_json_schema(ref_template="#/components/schemas/{model}")
             schemas.update(schema.pop("$defs", {}))
             schemas[model.__name__] = schema
