@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -82,14 +83,14 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import os
     from pathlib import Path
 
     from .logs import setup_logging
     from .serve import serve
 
     setup_logging()
-    return serve(args.host, args.port, args.workers, Path(args.data), args.redis_url or os.environ.get("AMPREP_REDIS_URL"))
+    return serve(args.host, args.port, args.workers, Path(args.data), args.redis_url or os.environ.get("AMPREP_REDIS_URL"),
+                 run_workers=not args.no_workers)
 
 
 def _param_value(text: str) -> object:
@@ -100,7 +101,6 @@ def _param_value(text: str) -> object:
 
 
 def cmd_submit(args: argparse.Namespace) -> int:
-    import os
     from pathlib import Path
 
     from .client import Client, main_artifact
@@ -174,8 +174,10 @@ def build_parser() -> argparse.ArgumentParser:
     sv.add_argument("--host", default="127.0.0.1", help="address to bind (not loopback: API keys required)")
     sv.add_argument("--port", type=int, default=8000)
     sv.add_argument("--workers", type=int, default=2, help="worker processes for convert/analyze (refine: half)")
-    sv.add_argument("--data", default="amprep-data", help="jobs, artifacts and Redis's append-only file")
+    sv.add_argument("--data", default=os.environ.get("AMPREP_DATA_DIR", "amprep-data"),
+                    help="jobs, artifacts and Redis's append-only file (default: $AMPREP_DATA_DIR or ./amprep-data)")
     sv.add_argument("--redis-url", help="use this Redis instead of a private one (default: $AMPREP_REDIS_URL)")
+    sv.add_argument("--no-workers", action="store_true", help="the API only (workers run elsewhere: Docker, many hosts)")
     sv.set_defaults(func=cmd_serve)
 
     sb = sub.add_parser("submit", help="send a file to an amprep server and (with --wait or -o) wait for the result")

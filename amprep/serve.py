@@ -146,8 +146,9 @@ def wait_http(url: str, timeout: float = 60.0) -> bool:
 
 
 def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None = None,
-          echo=print) -> int:  # type: ignore[no-untyped-def]
-    """Run Redis (unless redis_url is given), the workers and the API until SIGINT/SIGTERM; exit status."""
+          echo=print, run_workers: bool = True) -> int:  # type: ignore[no-untyped-def]
+    """Run Redis (unless redis_url is given), the workers (unless not run_workers) and the API until SIGINT or
+    SIGTERM; exit status."""
     from .settings import get_settings
 
     settings = get_settings()
@@ -168,13 +169,14 @@ def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None 
 
     old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        for name, cmd in worker_commands(workers).items():
+        for name, cmd in (worker_commands(workers) if run_workers else {}).items():
             sup.start(name, cmd)
         sup.start("api", [sys.executable, "-m", "uvicorn", "app.main:app", "--host", host, "--port", str(port),
                           "--no-access-log", "--log-level", "warning", "--timeout-graceful-shutdown", "5"])
         base = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
         if wait_http(base + "/healthz"):
-            echo(f"amprep serving on http://{host}:{port}  (data {data}; {origin} at {redis_url}; {workers} worker(s))")
+            echo(f"amprep serving on http://{host}:{port}  (data {data}; {origin} at {redis_url}; "
+                 f"{f'{workers} worker(s)' if run_workers else 'API only'})")
         else:
             echo("amprep: the API did not answer within 60 s; see the log above")
         while not stopping:

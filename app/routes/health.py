@@ -11,6 +11,7 @@ from starlette.concurrency import run_in_threadpool
 
 from amprep.geometry.errors import ErrorCode
 
+from ..deps import OwnerDep
 from ..problems import problem
 
 router = APIRouter(tags=["health"])
@@ -46,8 +47,9 @@ async def readyz(request: Request) -> JSONResponse:
     return JSONResponse({"status": "ready", "workers": workers})
 
 
-@router.get("/metrics", operation_id="metrics", summary="Prometheus metrics", response_class=PlainTextResponse,
+@router.get("/metrics", operation_id="metrics", summary="Prometheus metrics (needs a key when keys are configured)",
+            response_class=PlainTextResponse,
             responses={200: {"content": {"text/plain": {}}}})
-async def metrics(request: Request) -> PlainTextResponse:
+async def metrics(request: Request, _owner: OwnerDep) -> PlainTextResponse:
     body = await run_in_threadpool(generate_latest, request.app.state.registry)
     return PlainTextResponse(body.decode(), media_type=CONTENT_TYPE_LATEST)

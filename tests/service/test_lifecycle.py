@@ -174,7 +174,8 @@ def test_api_keys_isolate_owners(service, keyed_api):
     b = httpx.Client(base_url=keyed_api, headers={"Authorization": f"Bearer {KEY_B}"}, timeout=60)
     anon = httpx.Client(base_url=keyed_api, timeout=60)
     with a, b, anon:
-        assert anon.get("/healthz").status_code == 200
+        assert anon.get("/healthz").status_code == 200 and anon.get("/readyz").status_code == 200
+        assert anon.get("/metrics").status_code == 401 and a.get("/metrics").status_code == 200
         r = anon.get("/v1/jobs")
         assert r.status_code == 401 and r.json()["code"] == "unauthorized" and r.headers["www-authenticate"] == "Bearer"
         bad = httpx.get(keyed_api + "/v1/jobs", headers={"Authorization": "Bearer wrong"})
