@@ -18,5 +18,12 @@ def _json_logs(**_: object) -> None:
 
 @signals.worker_init.connect
 def _preload(**_: object) -> None:
-    """Import OCCT and the geometry library once in the parent, so each fresh child process starts warm."""
-    import amprep.geometry.convert  # noqa: F401
+    """Import OCCT and the geometry library once in the parent, so each fresh child process starts warm.
+
+    Imports only: meshing here could start OCCT's thread pool, which a forked child would inherit broken.
+    """
+    import importlib
+
+    for name in ("amprep.runner", "amprep.geometry.convert", "amprep.geometry.report", "amprep.geometry.fallback",
+                 "manifold3d", "lib3mf", "triangle", "scipy.sparse.csgraph"):
+        importlib.import_module(name)
