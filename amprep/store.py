@@ -281,8 +281,8 @@ class JobStore:
 
     # -- retention -------------------------------------------------------------------------------------------
     def sweep(self) -> int:
-        """Delete finished jobs older than the retention (at most once a minute across all processes)."""
-        if not self.redis.set(f"{P}sweep-lock", "1", nx=True, ex=60):
+        """Delete ended jobs older than the retention (at most once a minute, or per retention/4, across all processes)."""
+        if not self.redis.set(f"{P}sweep-lock", "1", nx=True, ex=max(1, min(60, self.retention // 4))):
             return 0
         cutoff = now() - self.retention
         removed = 0
