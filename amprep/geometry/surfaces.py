@@ -147,7 +147,8 @@ def surface_of(face: TopoDS_Face) -> Surface:
         return Surface(name, plane(o, x, y))
     if kind == GeomAbs_Cylinder:
         c = ad.Cylinder()
-        return Surface(name, cylinder(*_frame(c.Position()), c.Radius()), data=dict(radius=c.Radius()))
+        o, x, y, z = _frame(c.Position())
+        return Surface(name, cylinder(o, x, y, z, c.Radius()), data=dict(radius=c.Radius(), origin=o, axis=z))
     if kind == GeomAbs_Cone:
         c = ad.Cone()
         return Surface(name, cone(*_frame(c.Position()), c.RefRadius(), c.SemiAngle()))

@@ -1,0 +1,58 @@
+"""Triangle regularity (source 000, Table 2): angle, area and edge measures, 1 equilateral, 0 degenerate."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: The source table's bins: [0, 0.005), [0.005, 0.4), [0.4, 0.8), [0.8, 1.0].
+BIN_EDGES = np.array([0.0, 0.005, 0.4, 0.8])
+MEASURES = ("angle", "area", "edge")
+
+
+def side_lengths(corners: np.ndarray) -> np.ndarray:
+    """(m, 3) |c_{k+1} − c_k| of (m, 3, 3) corners (side k is opposite corner k+2)."""
+    return np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)
+
+
+def regularity(corners: np.ndarray) -> dict[str, np.ndarray]:
+    """Per triangle of (m, 3, 3) corners: angle q_a = α_min / 60°; area q_A = 4√3·A / (l₁² + l₂² + l₃²);
+    edge q_e = l_min / l_max. Each (m,) in [0, 1]."""
+    lengths = side_lengths(corners)
+    sq = (lengths**2).sum(axis=1)
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q_area = np.where(sq > 0, 4 * np.sqrt(3) * area / sq, 0.0)
+        lmax = lengths.max(axis=1)
+        q_edge = np.where(lmax > 0, lengths.min(axis=1) / lmax, 0.0)
+        # angle at corner k between the sides to corners k+1 and k+2
+        a = np.roll(corners, -1, axis=1) - corners
+        b = np.roll(corners, -2, axis=1) - corners
+        cos = np.einsum("mkd,mkd->mk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
+        angles = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    q_angle = np.where(np.isfinite(angles).all(axis=1), np.nanmin(np.where(np.isfinite(angles), angles, 0), axis=1) / 60.0, 0.0)
+    return {"angle": np.clip(q_angle, 0, 1), "area": np.clip(q_area, 0, 1), "edge": np.clip(q_edge, 0, 1)}
+
+
+@dataclass(frozen=True)
+class RegularitySummary:
+    """Mean and the four bin counts of each measure."""
+
+    mean: dict[str, float]
+    bins: dict[str, list[int]]
+
+    def as_dict(self) -> dict[str, dict]:  # type: ignore[type-arg]
+        return {k: {"mean": self.mean[k], "bins": self.bins[k]} for k in MEASURES}
+
+
+def bin_counts(q: np.ndarray) -> list[int]:
+    """Counts of q in [0, 0.005), [0.005, 0.4), [0.4, 0.8), [0.8, 1.0]."""
+    idx = np.searchsorted(BIN_EDGES, q, side="right") - 1
+    return [int(c) for c in np.bincount(np.clip(idx, 0, 3), minlength=4)]
+
+
+def summarize(q: dict[str, np.ndarray]) -> RegularitySummary:
+    """Means and bin counts of the per-triangle measures of `regularity`."""
+    mean = {k: float(q[k].mean()) if len(q[k]) else float("nan") for k in MEASURES}
+    return RegularitySummary(mean, {k: bin_counts(q[k]) for k in MEASURES})
