@@ -82,6 +82,52 @@ def cmd_convert(args: argparse.Namespace) -> int:
     return 0
 
 
+def _build_dir(text: str) -> tuple[float, float, float]:
+    parts = [float(x) for x in text.split(",")]
+    if len(parts) != 3:
+        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"--build-dir takes x,y,z, got '{text}'")
+    return parts[0], parts[1], parts[2]
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .geometry.analysis import AnalysisParams, analyze_file
+    from .geometry.report_files import write_analysis
+    from .geometry.tessellate import MeshParams
+
+    params = AnalysisParams(layer=args.layer, build_dir=_build_dir(args.build_dir), sample_order=args.sample_order,
+                            cloud_density=args.cloud_density, bounding_box=not args.no_box)
+    mesh_params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular)
+    update, close = _progress_bar(args.quiet)
+    try:
+        a = analyze_file(args.input, args.stl, mesh_params, params, update)
+    finally:
+        close()
+    if args.report:
+        with open(args.report, "w") as fh:
+            json.dump(a.report, fh, indent=1, default=float)
+    if args.out_dir:
+        write_analysis(a, Path(args.out_dir))
+    if not args.quiet:
+        r = a.report
+        m = r["mesh"]
+        state = "watertight" if m["watertight"] else "NOT watertight"
+        print(f"{args.input}: {m['triangles']:,} triangles, {state}, {m['shells']} shell(s), volume {m['volume']:.6g} mm³")
+        if r["chordal_error"]:
+            print(f"  chordal error: mean {r['chordal_error']['mean']:.4g} mm, max {r['chordal_error']['max']:.4g} mm")
+        c = r["cusp_height"]
+        line = f"  cusp height (t = {c['layer']:g} mm): approximate mean {c['approximate']['mean']:.4g}, max {c['approximate']['max']:.4g}"
+        if c["bounding_box"] and c["bounding_box"]["mean"] is not None:
+            line += f"; bounding box mean {c['bounding_box']['mean']:.4g}, max {c['bounding_box']['max']:.4g}"
+        print(line)
+        reg = r["regularity"]
+        print("  regularity means: " + ", ".join(f"{k} {reg[k]['mean']:.3f}" for k in ("angle", "area", "edge")))
+        for issue in r["issues"]:
+            print(f"  {issue['severity']}: {issue['code']} ({issue['count']}): {issue['message']}")
+    return 0
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -170,6 +216,23 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
     c.set_defaults(func=cmd_convert)
 
+    an = sub.add_parser("analyze", help="the error report: mesh checks, chordal error, cusp height, cylindricity, regularity")
+    an.add_argument("input", help="STEP/IGES/BREP (tessellated as convert does) or STL")
+    an.add_argument("--stl", help="an STL made elsewhere, scored against the CAD INPUT")
+    an.add_argument("--layer", type=float, default=0.2, help="layer thickness in mm (default 0.2)")
+    an.add_argument("--build-dir", default="0,0,1", help="build direction x,y,z (default 0,0,1)")
+    an.add_argument("--sample-order", type=int, default=6, help="chordal sampling order (default 6: 28 points)")
+    an.add_argument("--cloud-density", type=float, help="points per mm² for the bounding-box method (default (4/t)²)")
+    an.add_argument("--no-box", action="store_true", help="skip the bounding-box cusp method")
+    an_tol = an.add_mutually_exclusive_group()
+    an_tol.add_argument("--tolerance", type=float, default=0.1, help="tessellation tolerance for CAD input (mm)")
+    an_tol.add_argument("--relative", type=float, default=None)
+    an.add_argument("--angular", type=float, default=0.5)
+    an.add_argument("--report", help="write report.json here")
+    an.add_argument("--out-dir", help="write the report, the scored mesh, per-triangle fields and PNG plots here")
+    an.add_argument("--quiet", action="store_true")
+    an.set_defaults(func=cmd_analyze)
+
     sv = sub.add_parser("serve", help="run the service on this machine: private Redis, workers and the API")
     sv.add_argument("--host", default="127.0.0.1", help="address to bind (not loopback: API keys required)")
     sv.add_argument("--port", type=int, default=8000)
@@ -202,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.command == "convert":
+    if args.command in ("convert", "analyze"):
         _quiet_occt()
     try:
         return int(args.func(args))

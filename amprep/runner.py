@@ -39,25 +39,25 @@ def run_convert(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Pa
     return summary, [out, out_dir / "summary.json"]
 
 
-def run_analyze(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Path, progress: ProgressFn | None) -> tuple[dict, list[Path]]:
-    """analyze: `report.json` with the input, the mesh checks and the issues found."""
-    from .geometry.convert import convert
-    from .geometry.report import SCHEMA, mesh_issues, mesh_section
+def run_analyze(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Path,
+                progress: ProgressFn | None) -> tuple[dict, list[Path]]:
+    """analyze: report.json, mesh.stl, per-triangle fields (chordal_error.f32, cusp_height.f32) and PNG plots."""
+    from .geometry.analysis import AnalysisParams, analyze_file
+    from .geometry.report_files import write_analysis
 
-    # With a user's STL the mesh scored is that STL (its checks); scoring it against the CAD is issue #5.
-    result = convert(stl if stl is not None else src, mesh_params(params), progress)
-    unmeshed = len(result.meshing.unmeshed_faces) if result.meshing else 0
-    report = {
-        "schema": SCHEMA,
-        "input": result.input,
-        "mesh": mesh_section(result.mesh, result.checks, result.manifold3d),
-        "issues": mesh_issues(result.checks, result.manifold3d, unmeshed),
-        "provenance": result.provenance,
-        "notes": result.notes,
-    }
-    path = out_dir / "report.json"
-    path.write_text(json.dumps(report, indent=2, default=float))
-    return {"mesh": report["mesh"], "issues": report["issues"]}, [path]
+    ap = AnalysisParams(layer=params.get("layer", 0.2), build_dir=tuple(params.get("build_dir", (0.0, 0.0, 1.0))),
+                        sample_order=params.get("sample_order", 6), cloud_density=params.get("cloud_density"),
+                        bounding_box=params.get("bounding_box", True))
+    a = analyze_file(src, stl, mesh_params(params), ap, progress)
+    if progress:
+        progress("writing", 1.0)
+    paths = write_analysis(a, out_dir)
+    r = a.report
+    summary = {"mesh": {k: r["mesh"][k] for k in ("triangles", "vertices", "watertight", "boundary_edges",
+                                                  "nonmanifold_edges", "shells", "volume", "area")},
+               "chordal_error": r["chordal_error"], "cusp_height": {k: r["cusp_height"][k] for k in ("layer", "approximate")},
+               "issues": r["issues"], "provenance": r.get("provenance", {})}
+    return summary, paths
 
 
 def run_refine(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Path, progress: ProgressFn | None) -> tuple[dict, list[Path]]:

@@ -45,7 +45,9 @@ class AnalyzeParams(_MeshingParams):
     layer: float = Field(0.2, gt=0, le=10, description="Layer thickness, mm (cusp height)")
     build_dir: tuple[float, float, float] = Field((0.0, 0.0, 1.0), description="Build direction")
     sample_order: int = Field(6, ge=1, le=30, description="Chordal sampling order inside each triangle")
-    cloud_density: float = Field(4.0, gt=0, le=1000, description="Points per mm² for the bounding-box cusp method")
+    cloud_density: float | None = Field(None, gt=0, le=10000, description="Points per mm² for the bounding-box cusp "
+                                        "method (default (4/layer)², at most 2 M points)")
+    bounding_box: bool = Field(True, description="Also run the thesis's bounding-box cusp-height method")
 
     @model_validator(mode="after")
     def _nonzero_direction(self) -> AnalyzeParams:

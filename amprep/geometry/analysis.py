@@ -220,10 +220,66 @@ def analyze_file(path: str | Path, stl: str | Path | None = None, mesh_params: M
     model: CadModel = read_cad(path, fmt)
     info.update(units=model.units, solids=model.solids, faces=len(model.faces))
     if stl is not None:
-        raise AmprepError(ErrorCode.NOT_IMPLEMENTED, "scoring an STL against its CAD is not available yet")
+        return _analyze_user_stl(model, Path(stl), info, mesh_params, params, prog)
     result = mesh_model(model, mesh_params, prog.span(0.0, 0.5))
     info.update(source="tessellation", tolerance=result.tolerance)
     surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
     a = analyze_mesh(result.mesh, params, surfaces, len(model.faces), info, result.tolerance, prog.span(0.5, 1.0))
+    a.report["provenance"] = provenance(mesh_params)
+    return a
+
+
+def _analyze_user_stl(model: CadModel, stl: Path, info: dict[str, Any], mesh_params: MeshParams,
+                      params: AnalysisParams, prog: Progress) -> Analysis:
+    """Score an STL made elsewhere against its CAD: align it (axis permutations, then ICP), give each triangle its
+    face and (u,v) by projection, then score it in the CAD's frame."""
+    from dataclasses import replace
+
+    from .align import align, kabsch
+    from .project import ReferenceCloud, isolate
+
+    user = read_stl(stl)
+    if user.n_triangles == 0:
+        raise AmprepError(ErrorCode.EMPTY_MODEL, "the STL holds no triangles")
+    prog("reference tessellation", 0.05)
+    diag = float(np.linalg.norm(np.ptp(user.vertices, axis=0)))
+    ref_tol = min(mesh_params.tolerance, max(diag * 2e-4, 1e-3))
+    reference = mesh_model(model, replace(mesh_params, tolerance=ref_tol, relative=None), prog.span(0.05, 0.35))
+    spacing = max(diag / 400, 0.01)
+    cloud = ReferenceCloud.of(reference.mesh, spacing)
+    prog("aligning the STL on the CAD", 0.35)
+    tol = max(1e-3 * diag, 0.02)
+    even, _, _ = cusp.point_cloud(user.corners, 1.0, max_points=50_000)
+    fit = align(user.vertices, cloud.points, inlier_distance=tol + spacing, stl_cloud=even)
+    surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
+    prog("isolating faces", 0.45)
+    for _ in range(8):  # polish the fit against the exact surfaces: matched corners → their projections
+        placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
+        scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol)
+        ok = scored.face_ids >= 0
+        if ok.sum() < 3:
+            break
+        groups = [np.flatnonzero(scored.face_ids == f) for f in np.unique(scored.face_ids[ok])]
+        tgt = np.concatenate([surfaces[int(scored.face_ids[g[0]])].evaluate(scored.uv[g].reshape(-1, 2)) for g in groups])
+        tris = np.concatenate(groups)
+        src = placed.corners[tris].reshape(-1, 3)
+        _, area = cusp.unit_normals(placed.corners[tris])
+        dR, dt = kabsch(src, tgt, np.repeat(area, 3) + 1e-12)  # weighted by area, like the surface itself
+        fit = replace(fit, rotation=dR @ fit.rotation, translation=dR @ fit.translation + dt)
+        if np.abs(dR - np.eye(3)).max() < 1e-12 and np.linalg.norm(dt) < 1e-10:
+            break
+    placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
+    scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol)
+    d_ok = dist[scored.face_ids >= 0]
+    fit = replace(fit, rms=float(np.sqrt(np.mean(d_ok**2))) if d_ok.size else fit.rms,
+                  max=float(d_ok.max()) if d_ok.size else fit.max)
+    info.update(source="user_stl", stl_sha256=sha256_file(stl), stl_triangles=user.n_triangles)
+    a = analyze_mesh(scored, params, surfaces, len(model.faces), info, None, prog.span(0.5, 1.0))
+    unmatched = int((scored.face_ids < 0).sum())
+    a.report["alignment"] = fit.as_dict() | {"match_tolerance": tol, "unmatched_triangles": unmatched}
+    if unmatched:
+        a.report["issues"].append({"code": "unmatched_triangles", "severity": "warning", "count": unmatched,
+                                   "message": f"STL triangles with a corner farther than {tol:.3g} mm from every CAD "
+                                   "face: the STL differs from the CAD there (not scored)"})
     a.report["provenance"] = provenance(mesh_params)
     return a

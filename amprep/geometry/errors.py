@@ -17,6 +17,7 @@ class ErrorCode(StrEnum):
     WRITE_FAILED = "write_failed"
     CANCELLED = "cancelled"
     NOT_IMPLEMENTED = "not_implemented"
+    STL_MISMATCH = "stl_mismatch"
     # Raised by the service around the library (jobs and HTTP), listed here so there is one enum of codes.
     WORKER_CRASHED = "worker_crashed"
     TIME_LIMIT = "time_limit"

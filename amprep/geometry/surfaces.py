@@ -49,6 +49,8 @@ class Surface:
     evaluate: Callable[[np.ndarray], np.ndarray]
     exact_numpy: bool = True
     data: dict | None = None
+    periods: tuple[float | None, float | None] = (None, None)  # period of u and of v where periodic
+    bounds: tuple[float, float, float, float] | None = None  # (u1, u2, v1, v2) of the face
 
     @property
     def affine(self) -> bool:
@@ -139,7 +141,16 @@ def _occt_loop(adaptor: BRepAdaptor_Surface) -> Callable[[np.ndarray], np.ndarra
 
 def surface_of(face: TopoDS_Face) -> Surface:
     """The exact surface of a face, located in world coordinates, with a vectorised evaluator."""
+    from dataclasses import replace
+
     ad = BRepAdaptor_Surface(face, True)
+    surf = _surface(ad)
+    periods = (ad.UPeriod() if ad.IsUPeriodic() else None, ad.VPeriod() if ad.IsVPeriodic() else None)
+    bounds = (ad.FirstUParameter(), ad.LastUParameter(), ad.FirstVParameter(), ad.LastVParameter())
+    return replace(surf, periods=periods, bounds=bounds)
+
+
+def _surface(ad: BRepAdaptor_Surface) -> Surface:
     kind = ad.GetType()
     name = SURFACE_TYPES.get(kind, "other")
     if kind == GeomAbs_Plane:

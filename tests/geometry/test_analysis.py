@@ -205,3 +205,44 @@ def test_report_of_a_cad_part_has_the_fixed_keys():
                 "regularity"} <= set(f)
         assert f["chordal_error"]["max"] <= 0.05 * (1 + 1e-9)
     assert r["cusp_height"]["bounding_box"]["per_slice"] and r["issues"] == []
+
+
+def _validate(report: dict) -> None:
+    import jsonschema
+
+    from tests.conftest import CORPUS  # noqa: F401  (the schema lives in the repository)
+
+    schema_path = __import__("pathlib").Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json"
+    schema = json.loads(schema_path.read_text())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    jsonschema.validate(json.loads(json.dumps(report)), schema)
+
+
+@pytest.mark.parametrize("name", ["voron_vhb_din_mount.step", "voron_rear_skirt_nonmanifold.stl", "triangle_soup.stl"])
+def test_reports_follow_the_json_schema(name):
+    a = analyze_file(corpus(name), params=AnalysisParams(bounding_box=name.endswith("step")))
+    _validate(a.report)
+
+
+def test_cli_analyze_writes_report_plots_and_fields(tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "amprep", "analyze", str(corpus("voron_vhb_din_mount.step")),
+                        "--layer", "0.1", "--build-dir", "0,1,0", "--out-dir", str(out), "--report", str(tmp_path / "r.json")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "watertight" in r.stdout and "chordal error" in r.stdout
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["cusp_height"]["layer"] == 0.1 and report["cusp_height"]["build_direction"] == [0, 1, 0]
+    m = report["mesh"]["triangles"]
+    for field in ("chordal_error.f32", "cusp_height.f32"):
+        values = np.fromfile(out / field, "<f4")
+        assert len(values) == m
+    assert np.nanmax(np.fromfile(out / "chordal_error.f32", "<f4")) == pytest.approx(report["chordal_error"]["max"], rel=1e-6)
+    for png in ("cusp_per_slice.png", "chordal_per_face.png", "regularity.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    bad = subprocess.run([sys.executable, "-m", "amprep", "analyze", str(corpus("voron_vhb_din_mount.step")),
+                          "--build-dir", "0,0,0"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "[invalid_parameter]" in bad.stderr

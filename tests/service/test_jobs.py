@@ -64,11 +64,17 @@ def test_3mf_and_ascii_outputs(service):
 
 def test_analyze_job_writes_a_report(service):
     with service.client() as c:
-        job = submit(c, corpus(PART), kind="analyze", wait=120).json()
+        job = submit(c, corpus(PART), kind="analyze", params='{"layer": 0.1}', wait=120).json()
         assert job["status"] == "succeeded", job["error"]
         report = c.get(job["artifacts"][0]["url"]).json()
+        names = {a["name"]: a for a in job["artifacts"]}
+        assert {"report.json", "mesh.stl", "chordal_error.f32", "cusp_height.f32", "cusp_per_slice.png",
+                "chordal_per_face.png", "regularity.png"} <= set(names)
+        assert names["chordal_error.f32"]["size"] == 4 * report["mesh"]["triangles"]
+        assert names["regularity.png"]["media_type"] == "image/png"
     assert report["schema"] == "amprep.report/1" and report["mesh"]["watertight"] is True
-    assert report["issues"] == []
+    assert report["issues"] == [] and report["cusp_height"]["layer"] == 0.1 and report["faces"]
+    assert job["result"]["chordal_error"]["max"] == report["chordal_error"]["max"]
 
 
 def test_analyze_an_open_stl_lists_its_defects(service):

@@ -1,0 +1,83 @@
+"""An STL made elsewhere, scored against its CAD: alignment (axis permutations, then least squares), face isolation
+and (u,v) by projection."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from amprep.geometry.analysis import AnalysisParams, analyze_file
+from amprep.geometry.cad import model_from_shape
+from amprep.geometry.errors import AmprepError
+from amprep.geometry.io_stl import write_stl
+from amprep.geometry.mesh import Mesh
+from amprep.geometry.mesher import mesh_model
+from amprep.geometry.tessellate import MeshParams
+from tests.conftest import corpus
+
+FAST = AnalysisParams(bounding_box=False)
+
+
+def test_vhb_din_mount_with_its_authors_stl():
+    a = analyze_file(corpus("voron_vhb_din_mount.step"), corpus("voron_vhb_din_mount.stl"), params=FAST)
+    r = a.report
+    al = r["alignment"]
+    assert al["inlier_fraction"] == 1.0 and al["unmatched_triangles"] == 0 and al["rms"] < 0.005
+    # the part is symmetric under a half turn about z: either fit is exact, z is kept and the STL was moved onto the bed
+    assert al["rotation"][2][2] == pytest.approx(1.0, abs=1e-6)
+    assert al["translation"][2] == pytest.approx(-148.1638, abs=0.01)
+    assert r["input"]["source"] == "user_stl" and r["mesh"]["triangles"] == 2116
+    assert sum(f["triangles"] for f in r["faces"]) == 2116 and r["chordal_error"]["max"] < 0.05
+
+
+def test_hotend_mount_stl_in_print_orientation_is_rotated_back():
+    a = analyze_file(corpus("voron_hotend_mount_dragon.step"), corpus("voron_hotend_mount_dragon.stl"), params=FAST)
+    al = a.report["alignment"]
+    R = np.array(al["rotation"])
+    assert np.allclose(np.abs(R).round(), [[1, 0, 0], [0, 0, 1], [0, 1, 0]], atol=1e-4)  # y and z swapped
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    assert al["unmatched_triangles"] == 0 and al["rms"] < 0.005
+    assert al["inlier_fraction"] > 0.8  # some of the STL's vertices sit where it differs slightly from this STEP
+
+
+def _rotation(axis, angle):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def test_forced_arbitrary_motion_is_recovered_and_scores_match(reference_solids, tmp_path):
+    """An STL of a part moved by an axis swap, a 7° tilt and a shift is put back, and scores like the original."""
+    import cadquery as cq
+
+    # no symmetry: an off-centre hole and one rounded vertical edge
+    shape = (cq.Workplane().box(40, 24, 12).faces(">Z").workplane().center(9, 4).hole(8)
+             .edges("|Z and >X and >Y").fillet(5).val().wrapped)
+    model = model_from_shape(shape)
+    mesh = mesh_model(model, MeshParams(tolerance=0.05)).mesh
+    motion = _rotation([0.3, 1, 0.2], np.radians(7)) @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]])
+    shift = np.array([120.0, -40.0, 7.5])
+    moved = Mesh.from_arrays(mesh.vertices @ motion.T + shift, mesh.triangles)
+    stl = tmp_path / "moved.stl"
+    write_stl(moved, stl)
+    step = tmp_path / "part.brep"
+    from OCP.BRepTools import BRepTools
+
+    BRepTools.Write_s(shape, str(step))
+    a = analyze_file(step, stl, params=FAST)
+    al = a.report["alignment"]
+    assert np.allclose(np.array(al["rotation"]) @ motion, np.eye(3), atol=5e-4)  # within 0.03°
+    assert np.allclose(np.array(al["rotation"]) @ shift + al["translation"], 0, atol=0.02)
+    assert al["rms"] < 0.005
+    assert al["unmatched_triangles"] == 0
+    direct = analyze_file(step, params=FAST, mesh_params=MeshParams(tolerance=0.05))
+    # the same triangles score the same, up to the fit's residual (float32 STL, µm)
+    diff = np.abs(a.chordal - direct.chordal)
+    assert np.nanmedian(diff) < 1e-3 and np.nanmax(diff) <= al["max"] + 1e-6
+    assert a.report["chordal_error"]["max"] <= 0.05 + al["max"]
+
+
+def test_an_stl_of_another_part_is_an_error_with_its_code():
+    with pytest.raises(AmprepError) as err:
+        analyze_file(corpus("voron_vhb_din_mount.step"), corpus("voron_hotend_mount_dragon.stl"), params=FAST)
+    assert err.value.code.value == "stl_mismatch"
