@@ -128,6 +128,61 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+def _faces(text: str | None) -> tuple[int, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"--faces takes face ids like 3,7, got '{text}'") from None
+
+
+def cmd_refine(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .geometry.refine import RefineParams, refine_file
+    from .geometry.report_files import write_refinement
+    from .geometry.tessellate import MeshParams
+
+    params = RefineParams(method=args.method, faces=_faces(args.faces), max_chordal=args.max_chordal,
+                          max_cusp=args.max_cusp, max_cylindricity=args.max_cylindricity, layer=args.layer,
+                          build_dir=_build_dir(args.build_dir), ratios=args.ratios, iterations=args.iterations,
+                          compare=not args.no_compare)
+    mesh_params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular)
+    out = Path(args.output)
+    if out.suffix.lower() not in (".stl", ".3mf"):
+        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"output must end in .stl or .3mf, got '{out.name}'")
+    if not out.resolve().parent.is_dir():
+        raise AmprepError(ErrorCode.WRITE_FAILED, f"cannot write {out}: no directory {out.parent}")
+    update, close = _progress_bar(args.quiet)
+    try:
+        r = refine_file(args.input, args.stl, mesh_params, params, update)
+    finally:
+        close()
+    from .geometry.report_files import write_refined_mesh
+
+    write_refined_mesh(r, out, args.ascii)
+    if args.report:
+        with open(args.report, "w") as fh:
+            json.dump(r.report, fh, indent=1, default=float)
+    if args.out_dir:
+        write_refinement(r, Path(args.out_dir), out.name, args.ascii)
+    if not args.quiet:
+        rep = r.report
+        b, a = rep["mesh_before"], rep["mesh"]
+        state = "closed" if a["closed"] else "open"
+        print(f"{out}: {a['triangles']:,} triangles (from {b['triangles']:,}), {state}; "
+              f"{len(rep['refined_faces'])} face(s) refined by {rep['method'].upper()}")
+        for f in rep["refined_faces"]:
+            cb, ca = f["chordal_error_before"], f["chordal_error_after"]
+            err = f"chordal mean {cb['mean']:.4g} → {ca['mean']:.4g} mm" if cb and ca else "no chordal error"
+            print(f"  face {f['id']} {f['surface_type']}: {f['triangles_before']} → {f['triangles_after']} triangles, "
+                  f"{err} ({f['reason']})")
+        for issue in rep["issues"]:
+            print(f"  {issue['severity']}: {issue['code']}: {issue['message']}")
+    return 0
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -233,6 +288,30 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("--quiet", action="store_true")
     an.set_defaults(func=cmd_analyze)
 
+    rf = sub.add_parser("refine", help="densify the curved faces whose error is too high (SMA, or VTA), keeping the mesh closed")
+    rf.add_argument("input", help="STEP/IGES/BREP")
+    rf.add_argument("--stl", help="refine this STL made elsewhere (placed on the CAD; written back in its own frame)")
+    rf.add_argument("-o", "--output", required=True, help="OUT.stl or OUT.3mf")
+    rf.add_argument("--method", choices=["sma", "vta"], default="sma")
+    rf.add_argument("--faces", help="CAD face ids to refine, e.g. 3,7 (else chosen by the thresholds)")
+    rf.add_argument("--max-chordal", type=float, help="refine curved faces whose mean chordal error exceeds this (mm)")
+    rf.add_argument("--max-cusp", type=float, help="refine curved faces whose mean cusp height exceeds this (mm)")
+    rf.add_argument("--max-cylindricity", type=float, help="refine cylinders whose cylindricity zone exceeds this (mm)")
+    rf.add_argument("--layer", type=float, default=0.2, help="layer thickness for the cusp height (mm)")
+    rf.add_argument("--build-dir", default="0,0,1", help="build direction x,y,z")
+    rf.add_argument("--ratios", default="3:4:3,3:4:3", help="SMA spoke a:b:c and edge p:q:p ratios")
+    rf.add_argument("--iterations", type=int, default=1, help="VTA iterations")
+    rf_tol = rf.add_mutually_exclusive_group()
+    rf_tol.add_argument("--tolerance", type=float, default=0.2, help="first tessellation's tolerance without --stl (mm)")
+    rf_tol.add_argument("--relative", type=float, default=None)
+    rf.add_argument("--angular", type=float, default=0.5)
+    rf.add_argument("--ascii", action="store_true", help="ASCII STL")
+    rf.add_argument("--no-compare", action="store_true", help="skip the uniform re-tessellations and the other method")
+    rf.add_argument("--report", help="write report.json here")
+    rf.add_argument("--out-dir", help="write the refined mesh, report, per-triangle error and the PNG plot here")
+    rf.add_argument("--quiet", action="store_true")
+    rf.set_defaults(func=cmd_refine)
+
     sv = sub.add_parser("serve", help="run the service on this machine: private Redis, workers and the API")
     sv.add_argument("--host", default="127.0.0.1", help="address to bind (not loopback: API keys required)")
     sv.add_argument("--port", type=int, default=8000)
@@ -265,7 +344,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.command in ("convert", "analyze"):
+    if args.command in ("convert", "analyze", "refine"):
         _quiet_occt()
     try:
         return int(args.func(args))

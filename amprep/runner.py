@@ -60,8 +60,34 @@ def run_analyze(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Pa
     return summary, paths
 
 
-def run_refine(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Path, progress: ProgressFn | None) -> tuple[dict, list[Path]]:
-    raise AmprepError(ErrorCode.NOT_IMPLEMENTED, "refine is not available in this release (issue #6)")
+def run_refine(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Path,
+               progress: ProgressFn | None) -> tuple[dict, list[Path]]:
+    """refine: `refined.stl` (or .3mf; in the STL's own frame when one was given), report.json,
+    chordal_error.f32 and error_vs_size.png."""
+    from .geometry.refine import RefineParams, refine_file
+    from .geometry.report_files import write_refinement
+
+    rp = RefineParams(method=params.get("method", "sma"),
+                      faces=tuple(params["faces"]) if params.get("faces") is not None else None,
+                      max_chordal=params.get("max_chordal"), max_cusp=params.get("max_cusp"),
+                      max_cylindricity=params.get("max_cylindricity"), layer=params.get("layer", 0.2),
+                      build_dir=tuple(params.get("build_dir", (0.0, 0.0, 1.0))),
+                      ratios=params.get("ratios", "3:4:3,3:4:3"), iterations=params.get("iterations", 1),
+                      compare=params.get("compare", True))
+    mp = mesh_params({"tolerance": 0.2} | params)
+    r = refine_file(src, stl, mp, rp, progress)
+    if progress:
+        progress("writing", 1.0)
+    name = "refined.3mf" if params.get("format") == "3mf" else "refined.stl"
+    paths = write_refinement(r, out_dir, name, ascii=bool(params.get("ascii")))
+    rep = r.report
+    summary = {"method": rep["method"], "mesh_before": {k: rep["mesh_before"][k] for k in ("triangles", "closed")},
+               "mesh": {k: rep["mesh"][k] for k in ("triangles", "closed", "boundary_edges", "nonmanifold_edges")},
+               "refined_faces": [{k: f[k] for k in ("id", "surface_type", "triangles_before", "triangles_after",
+                                                   "chordal_error_before", "chordal_error_after")}
+                                 for f in rep["refined_faces"]],
+               "issues": rep["issues"], "provenance": rep["provenance"]}
+    return summary, paths
 
 
 RUNNERS = {"convert": run_convert, "analyze": run_analyze, "refine": run_refine}

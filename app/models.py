@@ -57,19 +57,32 @@ class AnalyzeParams(_MeshingParams):
 
 
 class RefineParams(_MeshingParams):
-    """Params of a refine job (SMA and its peers): densify the curved faces whose error is too high."""
+    """Params of a refine job: densify the curved faces whose error is too high (SMA, or its baseline VTA) and
+    compare with uniform re-tessellations. With an `stl` part, that STL is refined and returned in its own frame."""
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"method": "sma", "max_chordal": 0.02}]})
 
     tolerance: float = Field(0.2, gt=0, le=100, description="Tolerance of the first tessellation when no STL is given")
-    method: Literal["sma", "vta", "adaptive", "butterfly"] = "sma"
-    faces: list[int] | None = Field(None, description="CAD face ids to refine (else chosen by the thresholds)")
-    max_chordal: float | None = Field(None, gt=0, description="Refine faces whose chordal error exceeds this, mm")
-    max_cusp: float | None = Field(None, gt=0, description="Refine faces whose cusp height exceeds this, mm")
+    method: Literal["sma", "vta"] = "sma"
+    faces: list[int] | None = Field(None, description="CAD face ids to refine (else chosen by the thresholds; "
+                                    "with no threshold, every curved face)")
+    max_chordal: float | None = Field(None, gt=0, description="Refine curved faces whose mean chordal error exceeds this, mm")
+    max_cusp: float | None = Field(None, gt=0, description="Refine curved faces whose mean cusp height exceeds this, mm")
     max_cylindricity: float | None = Field(None, gt=0, description="Refine cylinders whose zone exceeds this, mm")
-    layer: float = Field(0.2, gt=0, le=10)
-    ratios: str = Field("3:4:3,3:4:3", pattern=r"^\d+:\d+:\d+,\d+:\d+:\d+$", description="SMA split ratios")
+    layer: float = Field(0.2, gt=0, le=10, description="Layer thickness, mm (cusp height)")
+    build_dir: tuple[float, float, float] = Field((0.0, 0.0, 1.0), description="Build direction")
+    ratios: str = Field("3:4:3,3:4:3", pattern=r"^\d+(\.\d+)?:\d+(\.\d+)?:\d+(\.\d+)?,\d+(\.\d+)?:\d+(\.\d+)?:\d+(\.\d+)?$",
+                        description="SMA spoke ratio a:b:c and edge ratio p:q:p")
     iterations: int = Field(1, ge=1, le=50, description="VTA iterations")
+    compare: bool = Field(True, description="Add uniform re-tessellations and the other method to the report")
+    format: Literal["stl", "3mf"] = Field("stl", description="Output format")
+    ascii: bool = Field(False, description="ASCII STL instead of binary")
+
+    @model_validator(mode="after")
+    def _nonzero_direction(self) -> RefineParams:
+        if sum(c * c for c in self.build_dir) == 0:
+            raise ValueError("build_dir must not be the zero vector")
+        return self
 
 
 PARAMS_MODEL: dict[str, type[_Params]] = {"convert": ConvertParams, "analyze": AnalyzeParams, "refine": RefineParams}

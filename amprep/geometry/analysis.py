@@ -229,30 +229,46 @@ def analyze_file(path: str | Path, stl: str | Path | None = None, mesh_params: M
     return a
 
 
-def _analyze_user_stl(model: CadModel, stl: Path, info: dict[str, Any], mesh_params: MeshParams,
-                      params: AnalysisParams, prog: Progress) -> Analysis:
-    """Score an STL made elsewhere against its CAD: align it (axis permutations, then ICP), give each triangle its
-    face and (u,v) by projection, then score it in the CAD's frame."""
+@dataclass(frozen=True, eq=False)
+class PlacedStl:
+    """A user's STL put on its CAD: `mesh` in the CAD's frame with face ids and (u,v) by projection (face −1:
+    unmatched), `fit` the rigid motion (user → CAD), `tolerance` the match tolerance, `surfaces` per face id."""
+
+    mesh: Mesh
+    fit: Any
+    tolerance: float
+    surfaces: dict[int, Surface]
+    reference_faces: tuple
+
+    @property
+    def unmatched(self) -> int:
+        return int((self.mesh.face_ids < 0).sum())
+
+    def alignment(self) -> dict[str, Any]:
+        return self.fit.as_dict() | {"match_tolerance": self.tolerance, "unmatched_triangles": self.unmatched}
+
+
+def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: Progress | None = None) -> PlacedStl:
+    """Align an STL made elsewhere on its CAD (axis permutations, then ICP, then a fit to the exact surfaces) and
+    give each triangle its face and (u,v) by projection; stl_mismatch when it does not fit."""
     from dataclasses import replace
 
     from .align import align, kabsch
     from .project import ReferenceCloud, isolate
 
-    user = read_stl(stl)
-    if user.n_triangles == 0:
-        raise AmprepError(ErrorCode.EMPTY_MODEL, "the STL holds no triangles")
-    prog("reference tessellation", 0.05)
+    prog = prog or Progress(None)
+    prog("reference tessellation", 0.0)
     diag = float(np.linalg.norm(np.ptp(user.vertices, axis=0)))
     ref_tol = min(mesh_params.tolerance, max(diag * 2e-4, 1e-3))
-    reference = mesh_model(model, replace(mesh_params, tolerance=ref_tol, relative=None), prog.span(0.05, 0.35))
+    reference = mesh_model(model, replace(mesh_params, tolerance=ref_tol, relative=None), prog.span(0.0, 0.6))
     spacing = max(diag / 400, 0.01)
     cloud = ReferenceCloud.of(reference.mesh, spacing)
-    prog("aligning the STL on the CAD", 0.35)
+    prog("aligning the STL on the CAD", 0.6)
     tol = max(1e-3 * diag, 0.02)
     even, _, _ = cusp.point_cloud(user.corners, 1.0, max_points=50_000)
     fit = align(user.vertices, cloud.points, inlier_distance=tol + spacing, stl_cloud=even)
     surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
-    prog("isolating faces", 0.45)
+    prog("isolating faces", 0.8)
     for _ in range(8):  # polish the fit against the exact surfaces: matched corners → their projections
         placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
         scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol)
@@ -273,13 +289,28 @@ def _analyze_user_stl(model: CadModel, stl: Path, info: dict[str, Any], mesh_par
     d_ok = dist[scored.face_ids >= 0]
     fit = replace(fit, rms=float(np.sqrt(np.mean(d_ok**2))) if d_ok.size else fit.rms,
                   max=float(d_ok.max()) if d_ok.size else fit.max)
+    prog("placed", 1.0)
+    return PlacedStl(scored, fit, tol, surfaces, reference.mesh.faces)
+
+
+def unmatched_issue(placed: PlacedStl) -> dict[str, Any]:
+    """The issue entry for STL triangles that match no CAD face."""
+    return {"code": "unmatched_triangles", "severity": "warning", "count": placed.unmatched,
+            "message": f"STL triangles with a corner farther than {placed.tolerance:.3g} mm from every CAD "
+            "face: the STL differs from the CAD there (not scored)"}
+
+
+def _analyze_user_stl(model: CadModel, stl: Path, info: dict[str, Any], mesh_params: MeshParams,
+                      params: AnalysisParams, prog: Progress) -> Analysis:
+    """Score an STL made elsewhere against its CAD, in the CAD's frame (place_user_stl)."""
+    user = read_stl(stl)
+    if user.n_triangles == 0:
+        raise AmprepError(ErrorCode.EMPTY_MODEL, "the STL holds no triangles")
+    placed = place_user_stl(model, user, mesh_params, prog.span(0.05, 0.5))
     info.update(source="user_stl", stl_sha256=sha256_file(stl), stl_triangles=user.n_triangles)
-    a = analyze_mesh(scored, params, surfaces, len(model.faces), info, None, prog.span(0.5, 1.0))
-    unmatched = int((scored.face_ids < 0).sum())
-    a.report["alignment"] = fit.as_dict() | {"match_tolerance": tol, "unmatched_triangles": unmatched}
-    if unmatched:
-        a.report["issues"].append({"code": "unmatched_triangles", "severity": "warning", "count": unmatched,
-                                   "message": f"STL triangles with a corner farther than {tol:.3g} mm from every CAD "
-                                   "face: the STL differs from the CAD there (not scored)"})
+    a = analyze_mesh(placed.mesh, params, placed.surfaces, len(model.faces), info, None, prog.span(0.5, 1.0))
+    a.report["alignment"] = placed.alignment()
+    if placed.unmatched:
+        a.report["issues"].append(unmatched_issue(placed))
     a.report["provenance"] = provenance(mesh_params)
     return a

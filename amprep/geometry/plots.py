@@ -75,3 +75,37 @@ def regularity_histograms(q: dict[str, np.ndarray], path: Path) -> Path:
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def error_vs_size(comparison: dict[str, Any], path: Path) -> Path:
+    """Mean chordal error of the refined faces against binary STL size: uniform re-tessellations as a curve, the
+    input, SMA and VTA as points (the thesis's comparison, Tables 1, 2, 6)."""
+    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
+
+    def xy(rows: list[dict[str, Any]]) -> tuple[list[float], list[float]]:
+        ok = [r for r in rows if r.get("chordal_error")]
+        return [r["file_size"] / 1024 for r in ok], [r["chordal_error"]["mean"] for r in ok]
+
+    x, y = xy(comparison.get("uniform", []))
+    ax.plot(x, y, "o-", c="tab:gray", ms=4, label="uniform re-tessellation")
+    seen: set[int] = set()
+    for r, tol in zip([q for q in comparison.get("uniform", []) if q.get("chordal_error")], x):
+        if r["triangles"] in seen:  # coarse tolerances that give the same mesh (angular deflection governs)
+            continue
+        seen.add(r["triangles"])
+        ax.annotate(f"{r['tolerance']:.3g}", (tol, r["chordal_error"]["mean"]), fontsize=6, xytext=(3, 3),
+                    textcoords="offset points")
+    for key, style in (("before", ("s", "black")), ("refined", ("*", "tab:red")), ("other_method", ("D", "tab:blue"))):
+        row = comparison.get(key)
+        if row and row.get("chordal_error"):
+            ax.plot(row["file_size"] / 1024, row["chordal_error"]["mean"], style[0], c=style[1], ms=9, label=row["label"])
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("binary STL size (KiB)")
+    ax.set_ylabel("mean chordal error of the refined faces (mm)")
+    ax.set_title("Error against file size")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path

@@ -11,6 +11,7 @@ from . import plots
 from .analysis import Analysis
 from .io_stl import write_stl
 from .quality import regularity
+from .refine import RefineResult
 
 #: Per-triangle fields for the viewer: little-endian float32, one value per triangle of mesh.stl, NaN = unknown.
 FIELDS = ("chordal_error", "cusp_height")
@@ -38,3 +39,39 @@ def write_analysis(a: Analysis, out_dir: Path, with_plots: bool = True) -> list[
                                                 out_dir / "chordal_per_face.png"))
         paths.append(plots.regularity_histograms(regularity(a.mesh.corners), out_dir / "regularity.png"))
     return paths
+
+
+def write_refinement(r: RefineResult, out_dir: Path, name: str = "refined.stl", ascii: bool = False,
+                     with_plots: bool = True) -> list[Path]:
+    """The refined mesh (STL or 3MF by `name`, in the user's frame), report.json, chordal_error.f32 of the refined
+    mesh and error_vs_size.png; returns their paths (the mesh first)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mesh_path = write_refined_mesh(r, out_dir / name, ascii)
+    report = out_dir / "report.json"
+    report.write_text(json.dumps(r.report, indent=1, default=float, allow_nan=False))
+    field = out_dir / "chordal_error.f32"
+    field.write_bytes(np.asarray(r.chordal, "<f4").tobytes())
+    paths = [mesh_path, report, field]
+    if with_plots and r.report.get("comparison"):
+        paths.append(plots.error_vs_size(r.report["comparison"], out_dir / "error_vs_size.png"))
+    return paths
+
+
+def write_refined_mesh(r: RefineResult, out: Path, ascii: bool = False) -> Path:
+    """The refined mesh as binary/ASCII STL or 3MF by the extension; header/metadata name the method and versions."""
+    from .errors import AmprepError, ErrorCode
+    from .io_3mf import write_3mf
+
+    p = r.report.get("provenance", {})
+    header = f"amprep {p.get('amprep')} occt {p.get('occt')} refine {r.report['method']} {r.report['params']['ratios']}"[:80]
+    try:
+        if out.suffix.lower() == ".stl":
+            write_stl(r.mesh, out, ascii=ascii, header=header)
+        elif out.suffix.lower() == ".3mf":
+            write_3mf(r.mesh, out, {"generator": header, "units": "millimetre",
+                                    "source_sha256": r.report["input"].get("sha256", "")})
+        else:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, f"output must end in .stl or .3mf, got '{out.name}'")
+    except OSError as exc:
+        raise AmprepError(ErrorCode.WRITE_FAILED, f"cannot write {out}: {exc.strerror}") from None
+    return out

@@ -87,12 +87,35 @@ def test_analyze_an_open_stl_lists_its_defects(service):
     assert all(i["count"] > 0 and i["severity"] in ("error", "warning", "info") for i in report["issues"])
 
 
-def test_refine_kind_exists_and_fails_with_a_code_until_it_lands(service):
+def test_refine_job_returns_the_users_stl_refined_in_its_own_frame(service, tmp_path):
+    """The thesis's setting over HTTP: STEP + the author's STL (rotated into print orientation) → refined STL in
+    the STL's frame, closed, with the report and the error-vs-size plot; on the heavy queue."""
+    stl = corpus("voron_vhb_din_mount.stl")
     with service.client() as c:
-        r = submit(c, corpus(PART), kind="refine", params='{"method": "sma", "max_chordal": 0.02}', wait=60)
-        assert r.status_code == 200
-        assert r.json()["status"] == "failed" and r.json()["error"]["code"] == "not_implemented"
+        job = submit(c, corpus(PART), kind="refine", params='{"method": "sma", "max_chordal": 0.005}', wait=240,
+                     stl=stl).json()
+        assert job["status"] == "succeeded", job["error"]
+        names = {a["name"]: a for a in job["artifacts"]}
+        assert {"refined.stl", "report.json", "chordal_error.f32", "error_vs_size.png"} <= set(names)
+        out = tmp_path / "refined.stl"
+        out.write_bytes(c.get(names["refined.stl"]["url"]).content)
+        report = c.get(names["report.json"]["url"]).json()
         assert submit(c, corpus(PART), kind="refine", params='{"method": "magic"}').json()["code"] == "invalid_request"
+        assert submit(c, corpus(PART), kind="refine", params='{"ratios": "3:4"}').json()["code"] == "invalid_request"
+    refined, original = read_stl(out), read_stl(stl)
+    assert check_mesh(refined).closed and refined.n_triangles > original.n_triangles
+    assert np.allclose(refined.bbox()[0], original.bbox()[0], atol=0.02)  # the user's frame, not the CAD's
+    assert np.allclose(refined.bbox()[1], original.bbox()[1], atol=0.02)
+    assert report["refined_faces"] and all(f["chordal_error_after"]["mean"] < f["chordal_error_before"]["mean"]
+                                           for f in report["refined_faces"])
+    assert job["result"]["mesh"]["closed"] is True and report["alignment"]["axis_permutation"]
+
+
+def test_refine_job_failure_has_a_code(service):
+    with service.client() as c:
+        job = submit(c, corpus("featuretype_inch.stl"), kind="refine", wait=120).json()
+    assert job["status"] == "failed" and job["error"]["code"] == "invalid_parameter"
+    assert "CAD" in job["error"]["message"]
 
 
 @pytest.mark.parametrize(("kind", "params", "code"), [

@@ -31,8 +31,8 @@ def test_submit_analyze_report_and_failed_job_exit_status(service, tmp_path):
     out = tmp_path / "report.json"
     r = _submit(str(corpus("voron_vhb_din_mount.step")), "--kind", "analyze", "--server", service.url, "-o", str(out))
     assert r.returncode == 0 and json.loads(out.read_text())["schema"] == "amprep.report/1"
-    r = _submit(str(corpus("voron_vhb_din_mount.step")), "--kind", "refine", "--server", service.url, "--wait")
-    assert r.returncode == 2 and "[not_implemented]" in r.stderr
+    r = _submit(str(corpus("featuretype_inch.stl")), "--kind", "refine", "--server", service.url, "--wait")
+    assert r.returncode == 2 and "[invalid_parameter]" in r.stderr
 
 
 def test_submit_errors_are_one_line_with_a_code(service, tmp_path):

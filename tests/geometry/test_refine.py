@@ -1,0 +1,183 @@
+"""SMA and VTA on exact parts: the facet-count rule, closedness, the error drop, the report and the CLI."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from amprep.geometry.analysis import face_chordal_errors
+from amprep.geometry.cad import model_from_shape
+from amprep.geometry.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.errors import AmprepError
+from amprep.geometry.io_stl import read_stl
+from amprep.geometry.mesh import Mesh
+from amprep.geometry.mesher import mesh_model
+from amprep.geometry.refine import RefineParams, refine_file
+from amprep.geometry.sma import Ratios, edge_table, sma_refine
+from amprep.geometry.surfaces import Surface, surface_of
+from amprep.geometry.tessellate import MeshParams
+from amprep.geometry.vta import vta_refine
+from tests.conftest import corpus
+
+
+def _euler(mesh: Mesh) -> int:
+    t = mesh.triangles
+    e = np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
+    return len(np.unique(t)) - len(e) + len(t)
+
+
+def _coarse(shape, tol=0.2):
+    model = model_from_shape(shape)
+    mesh = mesh_model(model, MeshParams(tolerance=tol)).mesh
+    return mesh, {i: surface_of(f) for i, f in enumerate(model.faces)}
+
+
+def _curved(surfaces):
+    return [i for i, s in surfaces.items() if s.surface_type != "plane"]
+
+
+def _cross_drilled_cylinder():
+    import cadquery as cq
+
+    body = cq.Workplane("XY").cylinder(30, 10)
+    return body.cut(cq.Workplane("YZ").cylinder(30, 3)).val().wrapped
+
+
+@pytest.mark.parametrize("name", ["cylinder", "sphere", "torus", "bspline_loft", "cone", "filleted_block"])
+def test_sma_keeps_the_part_closed_follows_the_count_rule_and_cuts_the_error(reference_solids, name):
+    mesh, surfaces = _coarse(reference_solids[name])
+    faces = _curved(surfaces)
+    r = sma_refine(mesh, faces, surfaces)
+    out = r.mesh
+    before, after = check_mesh(mesh), check_mesh(out)
+    assert before.closed and after.closed and manifold3d_accepts(out)
+    assert after.degenerate_triangles == 0 and after.duplicate_triangles == 0
+    assert _euler(out) == _euler(mesh)  # same genus (the torus: 0): no T-junction, no hole, no extra handle
+    assert after.volume == pytest.approx(before.volume, rel=0.05) and after.volume > 0
+    e0, e1 = face_chordal_errors(mesh, surfaces, 6), face_chordal_errors(out, surfaces, 6)
+    for f in faces:
+        cats = r.categories[f]
+        assert sum(cats) == (mesh.face_ids == f).sum()
+        assert (out.face_ids == f).sum() == sum(n * (27 + 2 * k) for k, n in enumerate(cats))
+        assert e1[out.face_ids == f].mean() <= 0.3 * e0[mesh.face_ids == f].mean()
+    untouched = ~np.isin(mesh.face_ids, faces)
+    assert (out.face_ids[~np.isin(out.face_ids, faces)] == mesh.face_ids[untouched]).all()
+    # every new vertex lies on its face's exact surface
+    new = np.arange(mesh.n_vertices, out.n_vertices)
+    assert len(new) and np.isin(out.vertex_entity[new], faces).all()
+
+
+def test_sma_on_a_face_with_holes_and_a_seam():
+    mesh, surfaces = _coarse(_cross_drilled_cylinder())
+    side = [i for i, s in surfaces.items() if s.surface_type == "cylinder" and s.data["radius"] == pytest.approx(10)]
+    assert len(side) == 1
+    _, inner = edge_table(mesh)
+    r = sma_refine(mesh, side, surfaces)
+    after = check_mesh(r.mesh)
+    assert check_mesh(mesh).closed and after.closed and after.degenerate_triangles == 0
+    assert _euler(r.mesh) == _euler(mesh)
+    assert r.categories[side[0]][1] > 0  # triangles along the holes' and the caps' contour edges
+
+
+def test_one_triangle_per_category_and_shared_edge_points():
+    """A flat square face of two triangles: the diagonal is inner (Type I, shared points), the four sides are
+    contour (Type II, intact): each triangle has 2 contour edges → 31 triangles, and the square's outline stays
+    the four original edges."""
+    v = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0]], float)
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = v[t][:, :, :2].copy()
+    plane = Surface("plane", lambda q: np.column_stack([q, np.zeros(len(q))]))
+    mesh = Mesh(v, t, np.zeros(2, np.int32), uv)
+    r = sma_refine(mesh, [0], {0: plane})
+    assert r.mesh.n_triangles == 2 * 31 and r.categories[0] == [0, 0, 2, 0]
+    c = check_mesh(r.mesh)
+    assert c.boundary_edges == 4 and c.nonmanifold_edges == 0 and c.misoriented_edges == 0
+    assert c.degenerate_triangles == 0 and c.area == pytest.approx(100)
+    assert _euler(r.mesh) == 1  # a disc
+    new = r.mesh.vertices[4:]
+    on_diagonal = np.abs(new[:, 0] - new[:, 1]) < 1e-12
+    assert on_diagonal.sum() == 2  # the two shared points of the inner edge, once each
+    assert np.allclose(np.sort(new[on_diagonal, 0]), [3, 7])  # p:q:p = 3:4:3 along the diagonal
+    # a single triangle whose three edges are contour: 33
+    r1 = sma_refine(Mesh(v, t[:1], np.zeros(1, np.int32), uv[:1]), [0], {0: plane})
+    assert r1.mesh.n_triangles == 33 and check_mesh(r1.mesh).boundary_edges == 3
+
+
+def test_ratios_are_parsed_and_checked():
+    r = Ratios.parse("1:2:1,2:1:2")
+    assert r.spoke_fractions == (0.25, 0.75) and r.edge_fractions == (0.4, 0.6)
+    for bad in ("3:4:3", "3:4:3,3:4:2", "1:8:1,3:4:3", "a:b:c,1:1:1", "0:1:1,1:1:1"):
+        with pytest.raises(AmprepError) as e:
+            Ratios.parse(bad)
+        assert e.value.code.value == "invalid_parameter"
+
+
+def test_vta_splits_each_triangle_in_three_per_iteration_and_stays_closed(reference_solids):
+    mesh, surfaces = _coarse(reference_solids["torus"])
+    r1 = vta_refine(mesh, [0], surfaces, iterations=1)
+    r2 = vta_refine(mesh, [0], surfaces, iterations=2)
+    assert r1.mesh.n_triangles == 3 * mesh.n_triangles and r2.mesh.n_triangles == 9 * mesh.n_triangles
+    for r in (r1, r2):
+        c = check_mesh(r.mesh)
+        assert c.closed and c.degenerate_triangles == 0 and manifold3d_accepts(r.mesh)
+    e0, e2 = face_chordal_errors(mesh, surfaces, 6), face_chordal_errors(r2.mesh, surfaces, 6)
+    assert e2.mean() < e0.mean()
+    r_thr = vta_refine(mesh, [0], surfaces, iterations=1, threshold=float(np.median(e0)))
+    assert mesh.n_triangles < r_thr.mesh.n_triangles < 3 * mesh.n_triangles
+
+
+def test_refine_report_selects_by_threshold_and_brackets_the_file_size(tmp_path, reference_solids):
+    from OCP.BRepTools import BRepTools
+
+    shape = reference_solids["filleted_block"]
+    path = tmp_path / "block.brep"
+    BRepTools.Write_s(shape, str(path))
+    r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(max_chordal=0.03))
+    rep = r.report
+    chosen = {f["id"] for f in rep["refined_faces"]}
+    assert chosen and all(f["surface_type"] == "sphere" for f in rep["refined_faces"])  # corners: 0.042 > 0.03
+    for f in rep["refined_faces"]:
+        assert f["reason"].startswith("mean chordal error") and f["chordal_error_before"]["mean"] > 0.03
+        assert set(f["categories"]) == {"0", "1", "2", "3"}
+        assert f["triangles_after"] == sum(n * (27 + 2 * int(k)) for k, n in f["categories"].items())
+        assert f["chordal_error_after"]["mean"] <= 0.3 * f["chordal_error_before"]["mean"]
+        assert {"cusp_height_before", "cusp_height_after", "cylindricity_before", "cylindricity_after"} <= set(f)
+    assert rep["mesh"]["closed"] and rep["mesh_before"]["closed"] and rep["issues"] == []
+    cmp_ = rep["comparison"]
+    sizes = [u["file_size"] for u in cmp_["uniform"]]
+    assert min(sizes) <= cmp_["refined"]["file_size"] <= max(sizes)
+    assert cmp_["refined"]["file_size"] == 84 + 50 * rep["mesh"]["triangles"]
+    assert cmp_["refined"]["chordal_error"]["mean"] < cmp_["before"]["chordal_error"]["mean"]
+    assert cmp_["other_method"]["label"].startswith("VTA")
+    none = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(max_chordal=10.0, compare=False))
+    assert none.report["refined_faces"] == [] and none.mesh.n_triangles == r.before.n_triangles
+    assert none.report["issues"][0]["code"] == "nothing_to_refine"
+    named = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(method="vta", faces=(1,), compare=False))
+    assert [f["id"] for f in named.report["refined_faces"]] == [1] and named.report["refined_faces"][0]["reason"] == "named"
+    with pytest.raises(AmprepError) as e:
+        refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(faces=(999,)))
+    assert e.value.code.value == "invalid_parameter"
+
+
+def test_refine_cli_on_the_users_stl_writes_it_back_in_its_frame(tmp_path):
+    out, report = tmp_path / "refined.stl", tmp_path / "r.json"
+    stl = corpus("voron_vhb_din_mount.stl")
+    r = subprocess.run([sys.executable, "-m", "amprep", "refine", str(corpus("voron_vhb_din_mount.step")), "--stl",
+                        str(stl), "-o", str(out), "--max-chordal", "0.005", "--report", str(report),
+                        "--out-dir", str(tmp_path / "all"), "--quiet"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(report.read_text())
+    refined, original = read_stl(out), read_stl(stl)
+    assert check_mesh(refined).closed and refined.n_triangles == rep["mesh"]["triangles"] > original.n_triangles
+    assert np.allclose(refined.bbox()[0], original.bbox()[0], atol=0.02)
+    assert np.allclose(refined.bbox()[1], original.bbox()[1], atol=0.02)
+    assert rep["alignment"]["inlier_fraction"] > 0.6 and rep["refined_faces"]
+    assert {"refined.stl", "report.json", "chordal_error.f32", "error_vs_size.png"} <= {
+        p.name for p in (tmp_path / "all").iterdir()}
+    bad = subprocess.run([sys.executable, "-m", "amprep", "refine", str(stl), "-o", str(tmp_path / "x.stl")],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and bad.stderr.startswith("amprep: error [invalid_parameter]")
