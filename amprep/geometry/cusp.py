@@ -9,7 +9,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 HORIZONTAL_COS = 1.0 - 1e-9  # |n̂·b̂| above this: a horizontal facet, printed flat, no stair step
 
@@ -86,6 +85,8 @@ class SliceSegments:
 def slice_segments(corners: np.ndarray, layer: float, build_dir: np.ndarray) -> SliceSegments:
     """Cut every triangle by the planes z_k = z_min + (k + ½)·t, k ≥ 0, along b (half a layer up, so no plane
     passes through the part's lowest or highest flat face); (P1, P2) per cut, in world coordinates."""
+    from ._cusp_kernel import slice_kernel
+
     frame = _basis(np.asarray(build_dir, float))
     z = corners @ frame[2]  # (m, 3)
     z0 = float(z.min()) + 0.5 * layer
@@ -94,22 +95,13 @@ def slice_segments(corners: np.ndarray, layer: float, build_dir: np.ndarray) -> 
     hi = np.floor((z.max(axis=1) - z0) / layer).astype(np.int64)
     lo, hi = np.maximum(lo, 0), np.minimum(hi, n_slices - 1)
     n = np.maximum(hi - lo + 1, 0)
-    tri = np.repeat(np.arange(len(corners)), n)
-    k = np.repeat(lo, n) + (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n))
-    h = z0 + k * layer
-    zt = z[tri]  # (s, 3)
-    c = corners[tri]
-    a, b_ = zt, np.roll(zt, -1, axis=1)
-    crosses = ((a - h[:, None]) * (b_ - h[:, None]) < 0) | ((a == h[:, None]) & (b_ != h[:, None]))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        f = np.where(crosses, (h[:, None] - a) / (b_ - a), 0.0)
-    pts = c + f[..., None] * (np.roll(c, -1, axis=1) - c)  # (s, 3 sides, 3)
-    ok = crosses.sum(axis=1) == 2
-    first = np.argmax(crosses, axis=1)
-    last = 2 - np.argmax(crosses[:, ::-1], axis=1)
-    rows = np.arange(len(tri))
-    p1, p2 = pts[rows, first], pts[rows, last]
-    keep = ok & (np.linalg.norm(p2 - p1, axis=1) > 1e-12)
+    offset = np.cumsum(n) - n
+    total = int(n.sum())
+    k, p1, p2 = np.empty(total, np.int64), np.empty((total, 3)), np.empty((total, 3))
+    valid = np.empty(total, bool)
+    slice_kernel(np.ascontiguousarray(corners, dtype=np.float64), np.ascontiguousarray(z), z0, float(layer), lo, n,
+                 offset, k, p1, p2, valid)
+    keep = valid
     heights = z0 + np.arange(n_slices) * layer
     return SliceSegments(k[keep], p1[keep], p2[keep], z0, heights)
 
@@ -167,58 +159,25 @@ def bounding_box(corners: np.ndarray, layer: float, build_dir: np.ndarray, densi
     length = np.linalg.norm(e, axis=1)
     e /= length[:, None]
     side = np.cross(b, e)  # horizontal, ⟂ P1P2
-    # two boxes per segment: box j < ns on the +side, j ≥ ns on the −side; local axes (e, d, b), origin P1
-    d = np.concatenate([side, -side])
-    origin = np.concatenate([seg.p1, seg.p1])
-    ee = np.concatenate([e, e])
-    L = np.concatenate([length, length])
-    # A point in layer k (z_k ≤ z < z_k + t) can only lie in boxes of slice k: per layer, a 2D KD-tree of the layer's
-    # points (in the slice plane) against pieces of the layer's boxes, each cut along P1P2 to at most `piece` long.
+    # two boxes per segment: box j < ns on the +side, j ≥ ns on the −side; local axes (e, ±side, b), origin P1
+    # A point in layer k (z_k ≤ z < z_k + t) can only lie in boxes of slice k: the points are hashed by (layer, 2D
+    # cell of the slice plane) and each segment visits the cells its two boxes cover (compiled kernel).
+    from ._cusp_kernel import box_cusp_kernel
+
     frame = _basis(b)
-    pz = pts @ b
     p2d = pts @ frame[:2].T
-    layer_of = np.floor((pz - seg.z0) / layer).astype(np.int64)
-    order = np.argsort(layer_of, kind="stable")
-    bounds = np.searchsorted(layer_of[order], np.arange(len(seg.heights) + 1))
-    box_slice = np.concatenate([seg.slice_index, seg.slice_index])
-    box_order = np.argsort(box_slice, kind="stable")
-    box_bounds = np.searchsorted(box_slice[box_order], np.arange(len(seg.heights) + 1))
-    piece = max(layer, 1.0)
-    radius = 0.5 * np.hypot(piece, layer) * (1 + 1e-9)
+    layer_of = np.floor((pts @ b - seg.z0) / layer).astype(np.int64)
+    cell = max(layer, 1.0 / np.sqrt(max(len(pts) / max(float(unit_normals(corners)[1].sum()), 1e-300), 1e-300)))
+    origin2 = p2d.min(axis=0) - cell
+    nx, ny = (np.floor((p2d.max(axis=0) + cell - origin2) / cell).astype(np.int64) + 1).tolist()
+    cxy = np.floor((p2d - origin2) / cell).astype(np.int64)
+    ok = (layer_of >= 0) & (layer_of < len(seg.heights))
+    keys = (layer_of * ny + cxy[:, 1]) * nx + cxy[:, 0]
+    order = np.flatnonzero(ok)[np.argsort(keys[ok], kind="stable")]
+    cell_keys, cell_start, counts = np.unique(keys[order], return_index=True, return_counts=True)
     height = np.full(2 * ns, -np.inf)
-    eps = 1e-9 * layer
-    for k in range(len(seg.heights)):
-        in_layer = order[bounds[k]:bounds[k + 1]]
-        boxes = box_order[box_bounds[k]:box_bounds[k + 1]]
-        if len(in_layer) == 0 or len(boxes) == 0:
-            continue
-        n_piece = np.maximum(np.ceil(L[boxes] / piece).astype(np.int64), 1)
-        owner = np.repeat(boxes, n_piece)
-        j = np.arange(n_piece.sum()) - np.repeat(np.cumsum(n_piece) - n_piece, n_piece)
-        plen = L[owner] / np.repeat(n_piece, n_piece)
-        centre = origin[owner] + ee[owner] * ((j + 0.5) * plen)[:, None] + 0.5 * layer * d[owner]
-        pairs = cKDTree(centre @ frame[:2].T).sparse_distance_matrix(cKDTree(p2d[in_layer]), radius,
-                                                                     output_type="ndarray")
-        if len(pairs) == 0:
-            continue
-        box, pt = owner[pairs["i"]], in_layer[pairs["j"]]
-        rel = pts[pt] - origin[box]
-        u, v, w = (rel * ee[box]).sum(1), (rel * d[box]).sum(1), rel @ b
-        inside = (u >= -eps) & (u <= L[box] + eps) & (v >= -eps) & (v <= layer + eps) & (w >= -eps) & (w <= layer + eps)
-        box, pt, v, w = box[inside], pt[inside], v[inside], w[inside]
-        n = normals[pt]
-        nv, nw = (n * d[box]).sum(1), n @ b
-        faces_wall = np.abs(nv) > 1e-9  # a surface parallel to the wall (its normal ⟂ d) says nothing about it
-        box, v, w, nv, nw = box[faces_wall], v[faces_wall], w[faces_wall], nv[faces_wall], nw[faces_wall]
-        flip = nv > 0  # the wall P1P2 is at v = 0: the ray heads towards it
-        nv, nw = np.where(flip, -nv, nv), np.where(flip, -nw, nw)
-        norm = np.hypot(nv, nw)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            nv, nw = nv / norm, nw / norm
-            tv = np.where(nv < 0, -v / nv, np.inf)
-            tw = np.where(nw > 0, (layer - w) / nw, np.where(nw < 0, -w / nw, np.inf))
-        dist = np.minimum(tv, tw)
-        dist = np.where((norm > 1e-12) & np.isfinite(dist), np.clip(dist, 0.0, None), 0.0)
-        np.maximum.at(height, box, dist)
+    box_cusp_kernel(seg.slice_index, seg.p1, e, side, length, b, np.ascontiguousarray(frame[:2]), float(layer),
+                    float(cell), origin2, nx, ny, cell_keys, cell_start, cell_start + counts,
+                    np.ascontiguousarray(pts[order]), np.ascontiguousarray(normals[order]), height)
     height[~np.isfinite(height)] = np.nan
     return BoxCusp(np.concatenate([seg.slice_index, seg.slice_index]), height, seg.heights, len(pts), used)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares, minimize
+from scipy.optimize import least_squares
 
 
 @dataclass(frozen=True)
@@ -76,20 +76,16 @@ def minimum_zone(points: np.ndarray, point: np.ndarray | None = None, direction:
     e1, e2 = _frame(d)
     scale = float(np.ptp(pts, axis=0).max()) or 1.0
 
-    def zone(x: np.ndarray) -> float:
-        aa, dd = _axis(x, a, d, e1, e2)
-        r = radial_distances(pts, aa, dd)
-        return float(r.max() - r.min())
+    from ._zone_kernel import nelder_mead_zone, zone_at
 
+    cpts = np.ascontiguousarray(pts)
     best = np.zeros(4)
-    start = zone(best)
+    start = zone_at(cpts, a, d, e1, e2, best)
     for step in (1e-2, 1e-4):  # coarse then fine simplex (the max−min objective is not smooth)
         init = np.vstack([best] + [best + step * np.eye(4)[i] * np.array([1, 1, scale, scale])[i] for i in range(4)])
-        res = minimize(zone, best, method="Nelder-Mead",
-                       options={"initial_simplex": init, "xatol": 1e-10, "fatol": max(start, 1e-9) * 1e-6,
-                                "maxiter": 1200})
-        if res.fun <= zone(best):
-            best = res.x
+        x, f = nelder_mead_zone(cpts, a, d, e1, e2, init, 1e-10, max(start, 1e-9) * 1e-6, 1200)
+        if f <= zone_at(cpts, a, d, e1, e2, best):
+            best = x
     aa, dd = _axis(best, a, d, e1, e2)
     r = radial_distances(pts, aa, dd)
     return Cylindricity(float(r.max() - r.min()), float((r.max() + r.min()) / 2), aa, dd)

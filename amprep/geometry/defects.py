@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from .checks import EdgeIncidence, degenerate_mask, edge_incidence
 from .mesh import Mesh
@@ -60,35 +59,54 @@ def nonmanifold_vertices(mesh: Mesh, inc: EdgeIncidence | None = None) -> np.nda
     return np.flatnonzero(fans > 1)
 
 
-def _candidate_pairs(corners: np.ndarray) -> np.ndarray:
-    """(p, 2) triangle pairs i < j whose bounding boxes overlap (broad phase): triangles grouped by size class
-    (powers of 2 of the half extent), one KD-tree of box centres per class, L∞ range queries between classes."""
+def _morton(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """(n,) int64 Morton codes of (n, 3) points quantised to 2^bits cells per axis of their bounding box."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    q = ((points - lo) / np.maximum(hi - lo, 1e-300) * ((1 << bits) - 1)).astype(np.int64)
+    code = np.zeros(len(points), np.int64)
+    for b in range(bits):
+        for axis in range(3):
+            code |= ((q[:, axis] >> b) & 1) << (3 * b + axis)
+    return code
+
+
+def box_tree(lo: np.ndarray, hi: np.ndarray, leaf_size: int = 4) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """Implicit bounding-volume hierarchy over boxes (n, 3): boxes in Morton order of their centres, leaf_size per
+    leaf, leaves padded to a power of two; returns (node lo (2P−1, 3), node hi, number of inner nodes P−1, order)."""
+    n = len(lo)
+    order = np.argsort(_morton((lo + hi) / 2), kind="stable")
+    leaves = -(-n // leaf_size)
+    size = 1 << max(0, int(np.ceil(np.log2(max(leaves, 1)))))
+    pad = size * leaf_size - n
+    slo = np.concatenate([lo[order], np.full((pad, 3), np.inf)]).reshape(size, leaf_size, 3).min(axis=1)
+    shi = np.concatenate([hi[order], np.full((pad, 3), -np.inf)]).reshape(size, leaf_size, 3).max(axis=1)
+    node_lo = np.empty((2 * size - 1, 3))
+    node_hi = np.empty((2 * size - 1, 3))
+    node_lo[size - 1:], node_hi[size - 1:] = slo, shi
+    width = size // 2
+    while width >= 1:  # each level from its children, bottom up
+        k = np.arange(width - 1, 2 * width - 1)
+        node_lo[k] = np.minimum(node_lo[2 * k + 1], node_lo[2 * k + 2])
+        node_hi[k] = np.maximum(node_hi[2 * k + 1], node_hi[2 * k + 2])
+        width //= 2
+    return node_lo, node_hi, size - 1, order
+
+
+def _candidate_pairs(corners: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(p, 2) triangle pairs i < j whose bounding boxes overlap and which share no vertex (broad phase): each box
+    queried against an implicit BVH in Morton order (the compiled kernel of _bvh_kernel.py)."""
+    from ._bvh_kernel import overlap_pairs_kernel
+
     lo, hi = corners.min(axis=1), corners.max(axis=1)
-    centre, half = (lo + hi) / 2, (hi - lo) / 2
-    r = half.max(axis=1)
-    rmin = max(float(r[r > 0].min()) if (r > 0).any() else 1.0, float(r.max()) * 1e-6)
-    cls = np.floor(np.log2(np.maximum(r, rmin) / rmin)).astype(np.int64)
-    groups = {int(c): np.flatnonzero(cls == c) for c in np.unique(cls)}
-    trees = {c: cKDTree(centre[g]) for c, g in groups.items()}
-    rmax = {c: float(r[g].max()) for c, g in groups.items()}
-    found = []
-    keys = sorted(groups)
-    for ia, a in enumerate(keys):
-        for b in keys[ia:]:
-            radius = rmax[a] + rmax[b]
-            if a == b:
-                p = trees[a].query_pairs(radius, p=np.inf, output_type="ndarray")
-                if len(p):
-                    found.append(np.stack([groups[a][p[:, 0]], groups[a][p[:, 1]]], axis=1))
-            else:
-                sdm = trees[a].sparse_distance_matrix(trees[b], radius, p=np.inf, output_type="ndarray")
-                if len(sdm):
-                    found.append(np.stack([groups[a][sdm["i"]], groups[b][sdm["j"]]], axis=1))
-    if not found:
-        return np.zeros((0, 2), np.int64)
-    p = np.sort(np.concatenate(found), axis=1)
-    overlap = np.all((lo[p[:, 0]] <= hi[p[:, 1]]) & (lo[p[:, 1]] <= hi[p[:, 0]]), axis=1)
-    return p[overlap]
+    node_lo, node_hi, n_inner, order = box_tree(lo, hi)
+    tris = np.ascontiguousarray(triangles, dtype=np.int64)
+    stack = np.empty(256, np.int64)
+    out = np.empty((4 * len(lo) + 1024, 2), np.int64)
+    count = overlap_pairs_kernel(node_lo, node_hi, n_inner, 4, order, lo, hi, tris, out, stack)
+    if count > len(out):
+        out = np.empty((count, 2), np.int64)
+        overlap_pairs_kernel(node_lo, node_hi, n_inner, 4, order, lo, hi, tris, out, stack)
+    return out[:count]
 
 
 def _interval_on_line(p: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -138,10 +156,7 @@ def self_intersections(mesh: Mesh, examples: int = 100) -> tuple[int, np.ndarray
     keep = ~degenerate_mask(mesh)
     idx = np.flatnonzero(keep)
     corners = mesh.vertices[t[idx]]
-    pairs = _candidate_pairs(corners)
-    ta, tb = t[idx[pairs[:, 0]]], t[idx[pairs[:, 1]]]
-    share = (ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
-    pairs = pairs[~share]
+    pairs = _candidate_pairs(corners, t[idx])
     hit = np.zeros(len(pairs), bool)
     step = 500_000
     for s in range(0, len(pairs), step):

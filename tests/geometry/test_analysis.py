@@ -246,3 +246,22 @@ def test_cli_analyze_writes_report_plots_and_fields(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "amprep", "analyze", str(corpus("voron_vhb_din_mount.step")),
                           "--build-dir", "0,0,0"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "[invalid_parameter]" in bad.stderr
+
+
+def test_self_intersection_broad_phase_finds_what_brute_force_finds(reference_solids):
+    """Two overlapping spheres: the BVH broad phase + narrow phase find exactly the crossing pairs that testing
+    every pair of triangles finds."""
+    from amprep.geometry.defects import triangles_cross
+
+    a = _mesh_of(reference_solids["sphere"], 0.5)
+    v = np.concatenate([a.vertices, a.vertices + [7.0, 3.0, 1.0]])
+    t = np.concatenate([a.triangles, a.triangles + a.n_vertices])
+    mesh = Mesh.from_arrays(v, t)
+    n, examples = self_intersections(mesh, examples=10**6)
+    i, j = np.triu_indices(len(t), 1)
+    distinct = ~(t[i][:, :, None] == t[j][:, None, :]).any(axis=(1, 2))
+    i, j = i[distinct], j[distinct]
+    corners = mesh.corners
+    brute = np.flatnonzero(triangles_cross(corners[i], corners[j]))
+    assert n == len(brute) > 50
+    assert {tuple(p) for p in np.sort(examples, axis=1).tolist()} == set(zip(i[brute].tolist(), j[brute].tolist()))
