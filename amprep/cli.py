@@ -170,7 +170,7 @@ def cmd_refine(args: argparse.Namespace) -> int:
     if not args.quiet:
         rep = r.report
         b, a = rep["mesh_before"], rep["mesh"]
-        state = "closed" if a["closed"] else "open"
+        state = "closed" if a["watertight"] else "open"
         print(f"{out}: {a['triangles']:,} triangles (from {b['triangles']:,}), {state}; "
               f"{len(rep['refined_faces'])} face(s) refined by {rep['method'].upper()}")
         for f in rep["refined_faces"]:

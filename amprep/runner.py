@@ -81,8 +81,8 @@ def run_refine(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Pat
     name = "refined.3mf" if params.get("format") == "3mf" else "refined.stl"
     paths = write_refinement(r, out_dir, name, ascii=bool(params.get("ascii")))
     rep = r.report
-    summary = {"method": rep["method"], "mesh_before": {k: rep["mesh_before"][k] for k in ("triangles", "closed")},
-               "mesh": {k: rep["mesh"][k] for k in ("triangles", "closed", "boundary_edges", "nonmanifold_edges")},
+    summary = {"method": rep["method"], "mesh_before": {k: rep["mesh_before"][k] for k in ("triangles", "watertight")},
+               "mesh": {k: rep["mesh"][k] for k in ("triangles", "watertight", "boundary_edges", "nonmanifold_edges")},
                "refined_faces": [{k: f[k] for k in ("id", "surface_type", "triangles_before", "triangles_after",
                                                    "chordal_error_before", "chordal_error_after")}
                                  for f in rep["refined_faces"]],

@@ -201,7 +201,7 @@ def main() -> None:
         cases = [("nist_ctc02_ap242.stp", 0.1, True)]
     else:
         cases = [("nist_ctc02_ap242.stp", 0.1, True), ("nist_ctc02_ap242.stp", 0.01, True),
-                 ("nist_ctc02_bspline_ap203.stp", 0.01, False), ("nist_ctc02_bspline_ap203.stp", 0.01, True),
+                 ("nist_ctc02_bspline_ap203.stp", 0.01, True), ("nist_ctc02_bspline_ap203.stp", 0.005, False),
                  ("nist_ctc02_bspline_ap203.stp", 0.005, True)]
     write(ev, large_rows(cases))
 

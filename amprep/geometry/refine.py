@@ -10,7 +10,15 @@ from typing import Any
 import numpy as np
 
 from . import cusp
-from .analysis import AnalysisParams, PlacedStl, face_chordal_errors, faces_section, place_user_stl, unmatched_issue
+from .analysis import (
+    AnalysisParams,
+    PlacedStl,
+    analyze_mesh,
+    face_chordal_errors,
+    faces_section,
+    place_user_stl,
+    unmatched_issue,
+)
 from .cad import CadModel, read_cad
 from .checks import check_mesh, manifold3d_accepts
 from .convert import provenance, sha256_file
@@ -21,6 +29,7 @@ from .mesh import Mesh
 from .mesher import mesh_model
 from .progress import Progress, ProgressFn
 from .quality import regularity
+from .report import mesh_section
 from .sma import Ratios, Refinement, sma_refine
 from .surfaces import Surface, surface_of
 from .tessellate import MeshParams
@@ -111,12 +120,9 @@ def _stats(x: np.ndarray) -> dict[str, float] | None:
 
 
 def _mesh_summary(mesh: Mesh) -> dict[str, Any]:
-    c = check_mesh(mesh)
-    return {"triangles": c.triangles, "vertices": c.vertices, "closed": c.closed,
-            "manifold3d": manifold3d_accepts(mesh), "boundary_edges": c.boundary_edges,
-            "nonmanifold_edges": c.nonmanifold_edges, "misoriented_edges": c.misoriented_edges,
-            "degenerate_triangles": c.degenerate_triangles, "shells": c.shells, "volume": c.volume, "area": c.area,
-            "file_size": STL_HEADER + STL_PER_TRIANGLE * c.triangles}
+    """The report's `mesh` keys (report.mesh_section) of the input mesh, and its binary STL size."""
+    section = mesh_section(mesh, check_mesh(mesh), manifold3d_accepts(mesh))
+    return section | {"file_size": STL_HEADER + STL_PER_TRIANGLE * mesh.n_triangles}
 
 
 def _score(mesh: Mesh, surfaces: dict[int, Surface], faces: np.ndarray, params: RefineParams,
@@ -217,8 +223,9 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
     ref = _refine(params.method, mesh, faces, surfaces, params, params.iterations)
     out = ref.mesh
     prog("scoring", 0.55)
-    ch1 = face_chordal_errors(out, surfaces, params.sample_order)
-    after = faces_section(out, ch1, surfaces, ap, regularity(out.corners), n_faces)
+    analysis = analyze_mesh(out, ap, surfaces, n_faces, info, None, prog.span(0.55, 0.6))
+    after = analysis.report["faces"]
+    ch1 = analysis.chordal
     refined = []
     for f in faces:
         b, a = before[f], after[f]
@@ -229,8 +236,9 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
                         "chordal_error_before": b["chordal_error"], "chordal_error_after": a["chordal_error"],
                         "cusp_height_before": b["cusp_height"], "cusp_height_after": a["cusp_height"],
                         "cylindricity_before": b["cylindricity"], "cylindricity_after": a["cylindricity"]})
-    mesh_before, mesh_after = _mesh_summary(mesh), _mesh_summary(out)
-    issues = []
+    mesh_before, mesh_after = _mesh_summary(mesh), analysis.report["mesh"]
+    mesh_after["file_size"] = STL_HEADER + STL_PER_TRIANGLE * out.n_triangles
+    issues = analysis.report["issues"]
     if (mesh_before["boundary_edges"], mesh_before["nonmanifold_edges"]) != (mesh_after["boundary_edges"],
                                                                                mesh_after["nonmanifold_edges"]):
         issues.append({"code": "topology_changed", "severity": "error", "count": 1,
@@ -256,16 +264,14 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
                       "note": "chordal_error, profile_error and cusp_height (t·|n·b|) over the refined faces; part_* "
                               "over the whole part (part_cusp_height_box: the thesis's bounding-box method); file_size "
                               "of a binary STL"}
-    report: dict[str, Any] = {
-        "schema": "amprep.report/1", "input": info, "method": params.method,
-        "params": {"method": params.method, "faces": list(params.faces) if params.faces is not None else None,
-                   "max_chordal": params.max_chordal, "max_cusp": params.max_cusp,
-                   "max_cylindricity": params.max_cylindricity, "layer": params.layer,
-                   "build_dir": list(params.build_dir), "ratios": params.ratios, "iterations": params.iterations,
-                   "sample_order": params.sample_order},
-        "mesh_before": mesh_before, "mesh": mesh_after, "refined_faces": refined, "comparison": comparison,
-        "issues": issues, "provenance": provenance(mesh_params),
-    }
+    report = analysis.report
+    report["params"] = {"method": params.method, "faces": list(params.faces) if params.faces is not None else None,
+                        "max_chordal": params.max_chordal, "max_cusp": params.max_cusp,
+                        "max_cylindricity": params.max_cylindricity, "layer": params.layer,
+                        "build_dir": list(params.build_dir), "ratios": params.ratios, "iterations": params.iterations,
+                        "sample_order": params.sample_order}
+    report.update(method=params.method, mesh_before=mesh_before, refined_faces=refined, comparison=comparison,
+                  issues=issues, provenance=provenance(mesh_params))
     user_frame = out
     if placed is not None:
         report["alignment"] = placed.alignment()

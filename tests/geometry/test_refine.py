@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 
@@ -138,6 +140,7 @@ def test_refine_report_selects_by_threshold_and_brackets_the_file_size(tmp_path,
     BRepTools.Write_s(shape, str(path))
     r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(max_chordal=0.03))
     rep = r.report
+    jsonschema.validate(rep, json.loads((Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json").read_text()))
     chosen = {f["id"] for f in rep["refined_faces"]}
     assert chosen and all(f["surface_type"] == "sphere" for f in rep["refined_faces"])  # corners: 0.042 > 0.03
     for f in rep["refined_faces"]:
@@ -146,7 +149,7 @@ def test_refine_report_selects_by_threshold_and_brackets_the_file_size(tmp_path,
         assert f["triangles_after"] == sum(n * (27 + 2 * int(k)) for k, n in f["categories"].items())
         assert f["chordal_error_after"]["mean"] <= 0.3 * f["chordal_error_before"]["mean"]
         assert {"cusp_height_before", "cusp_height_after", "cylindricity_before", "cylindricity_after"} <= set(f)
-    assert rep["mesh"]["closed"] and rep["mesh_before"]["closed"] and rep["issues"] == []
+    assert rep["mesh"]["watertight"] and rep["mesh_before"]["watertight"] and rep["issues"] == []
     cmp_ = rep["comparison"]
     sizes = [u["file_size"] for u in cmp_["uniform"]]
     assert min(sizes) <= cmp_["refined"]["file_size"] <= max(sizes)

@@ -108,7 +108,7 @@ def test_refine_job_returns_the_users_stl_refined_in_its_own_frame(service, tmp_
     assert np.allclose(refined.bbox()[1], original.bbox()[1], atol=0.02)
     assert report["refined_faces"] and all(f["chordal_error_after"]["mean"] < f["chordal_error_before"]["mean"]
                                            for f in report["refined_faces"])
-    assert job["result"]["mesh"]["closed"] is True and report["alignment"]["axis_permutation"]
+    assert job["result"]["mesh"]["watertight"] is True and report["alignment"]["axis_permutation"]
 
 
 def test_refine_job_failure_has_a_code(service):
