@@ -123,8 +123,8 @@ def _child_corpus(cad: str, stl: str, kwargs: str) -> None:
                     RefineParams(**json.loads(kwargs)))
     rep = r.report
     print(json.dumps(dict(seconds=time.perf_counter() - t0, faces=len(rep["refined_faces"]),
-                          comparison=rep["comparison"], closed_before=rep["mesh_before"]["closed"],
-                          closed_after=rep["mesh"]["closed"]), default=float))
+                          comparison=rep["comparison"], closed_before=rep["mesh_before"]["watertight"],
+                          closed_after=rep["mesh"]["watertight"]), default=float))
 
 
 def corpus_rows() -> list[dict]:
@@ -191,7 +191,7 @@ def write(speed: list[dict], corpus: list[dict]) -> None:
         c = r["comparison"]
         L += [f"### {r['label']}", "", f"{r['faces']} face(s) refined; closed before {r['closed_before']}, after "
               f"{r['closed_after']}; {r['seconds']:.1f} s in all.", "",
-              "| mesh | triangles | STL size (KB) | mean chordal error (mm) | profile error (mm) | cusp t·|n·b| (refined faces) | box cusp (part) |",
+              "| mesh | triangles | STL size (KB) | mean chordal error (mm) | profile error (mm) | cusp t·\\|n·b\\| (refined faces) | box cusp (part) |",
               "|---|---:|---:|---:|---:|---:|---:|"]
         for row in [c["before"], c["refined"], c["other_method"], *c["uniform"]]:
             L.append(f"| {row['label']} | {row['triangles']:,} | {row['file_size'] / 1000:.0f} | "

@@ -265,3 +265,42 @@ def test_self_intersection_broad_phase_finds_what_brute_force_finds(reference_so
     brute = np.flatnonzero(triangles_cross(corners[i], corners[j]))
     assert n == len(brute) > 50
     assert {tuple(p) for p in np.sort(examples, axis=1).tolist()} == set(zip(i[brute].tolist(), j[brute].tolist()))
+
+
+def test_box_cusp_spatial_hash_misses_no_point(reference_solids):
+    """The box method's hashed (layer, cell) lookup against testing every cloud point against every box: the same
+    cusp height in every box (the rays of thesis 3.1 step 4, computed here without any spatial index)."""
+    mesh = _mesh_of(reference_solids["sphere"], 0.5)
+    corners, t, b = mesh.corners, 1.0, np.array([0.0, 0.6, 0.8])
+    pts, tri, _ = cusp.point_cloud(corners, 2.0)
+    res = cusp.bounding_box(corners, t, b, cloud=(pts, tri))
+    unit, _ = cusp.unit_normals(corners)
+    seg = cusp.slice_segments(corners, t, b)
+    e = seg.p2 - seg.p1
+    e -= np.outer(e @ b, b)
+    length = np.linalg.norm(e, axis=1)
+    e /= length[:, None]
+    side = np.cross(b, e)
+    ref = np.full(2 * len(e), -np.inf)
+    n = unit[tri]
+    for s in range(len(e)):
+        rel = pts - seg.p1[s]
+        u, v, w = rel @ e[s], rel @ side[s], rel @ b
+        for sign, box in ((1.0, s), (-1.0, s + len(e))):
+            vv, nv, nw = sign * v, sign * (n @ side[s]), n @ b
+            ok = (u >= -1e-9) & (u <= length[s] + 1e-9) & (vv >= -1e-9) & (vv <= t + 1e-9) & (w >= -1e-9) & (w <= t + 1e-9)
+            ok &= np.abs(nv) > 1e-9
+            if not ok.any():
+                continue
+            flip = nv[ok] > 0
+            a, c = np.where(flip, -nv[ok], nv[ok]), np.where(flip, -nw[ok], nw[ok])
+            norm = np.hypot(a, c)
+            a, c = a / norm, c / norm
+            tv = -vv[ok] / a
+            with np.errstate(divide="ignore"):
+                tw = np.where(c > 0, (t - w[ok]) / c, np.where(c < 0, -w[ok] / c, np.inf))
+            ref[box] = np.clip(np.minimum(tv, tw), 0, None).max()
+    ref[~np.isfinite(ref)] = np.nan
+    assert np.isfinite(ref).sum() > 100
+    assert np.array_equal(np.isnan(ref), np.isnan(res.height))
+    assert np.allclose(ref[np.isfinite(ref)], res.height[np.isfinite(ref)], atol=1e-12)
