@@ -37,26 +37,31 @@ class ConvertParams(_MeshingParams):
     ascii: bool = Field(False, description="ASCII STL instead of binary")
 
 
-class AnalyzeParams(_MeshingParams):
-    """Params of an analyze job: the error report of a CAD part's tessellation, or of an STL."""
-
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"layer": 0.2, "build_dir": [0, 0, 1]}]})
+class _PrintParams(_MeshingParams):
+    """Layer thickness and build direction, for the cusp height."""
 
     layer: float = Field(0.2, gt=0, le=10, description="Layer thickness, mm (cusp height)")
     build_dir: tuple[float, float, float] = Field((0.0, 0.0, 1.0), description="Build direction")
-    sample_order: int = Field(6, ge=1, le=30, description="Chordal sampling order inside each triangle")
-    cloud_density: float | None = Field(None, gt=0, le=10000, description="Points per mm² for the bounding-box cusp "
-                                        "method (default (4/layer)², at most 2 M points)")
-    bounding_box: bool = Field(True, description="Also run the thesis's bounding-box cusp-height method")
 
     @model_validator(mode="after")
-    def _nonzero_direction(self) -> AnalyzeParams:
+    def _nonzero_direction(self) -> _PrintParams:
         if sum(c * c for c in self.build_dir) == 0:
             raise ValueError("build_dir must not be the zero vector")
         return self
 
 
-class RefineParams(_MeshingParams):
+class AnalyzeParams(_PrintParams):
+    """Params of an analyze job: the error report of a CAD part's tessellation, or of an STL."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"layer": 0.2, "build_dir": [0, 0, 1]}]})
+
+    sample_order: int = Field(6, ge=1, le=30, description="Chordal sampling order inside each triangle")
+    cloud_density: float | None = Field(None, gt=0, le=10000, description="Points per mm² for the bounding-box cusp "
+                                        "method (default (4/layer)², at most 2 M points)")
+    bounding_box: bool = Field(True, description="Also run the thesis's bounding-box cusp-height method")
+
+
+class RefineParams(_PrintParams):
     """Params of a refine job: densify the curved faces whose error is too high (SMA, or its baseline VTA) and
     compare with uniform re-tessellations. With an `stl` part, that STL is refined and returned in its own frame."""
 
@@ -69,20 +74,12 @@ class RefineParams(_MeshingParams):
     max_chordal: float | None = Field(None, gt=0, description="Refine curved faces whose mean chordal error exceeds this, mm")
     max_cusp: float | None = Field(None, gt=0, description="Refine curved faces whose mean cusp height exceeds this, mm")
     max_cylindricity: float | None = Field(None, gt=0, description="Refine cylinders whose zone exceeds this, mm")
-    layer: float = Field(0.2, gt=0, le=10, description="Layer thickness, mm (cusp height)")
-    build_dir: tuple[float, float, float] = Field((0.0, 0.0, 1.0), description="Build direction")
     ratios: str = Field("3:4:3,3:4:3", pattern=r"^\d+(\.\d+)?:\d+(\.\d+)?:\d+(\.\d+)?,\d+(\.\d+)?:\d+(\.\d+)?:\d+(\.\d+)?$",
                         description="SMA spoke ratio a:b:c and edge ratio p:q:p")
     iterations: int = Field(1, ge=1, le=50, description="VTA iterations")
     compare: bool = Field(True, description="Add uniform re-tessellations and the other method to the report")
     format: Literal["stl", "3mf"] = Field("stl", description="Output format")
     ascii: bool = Field(False, description="ASCII STL instead of binary")
-
-    @model_validator(mode="after")
-    def _nonzero_direction(self) -> RefineParams:
-        if sum(c * c for c in self.build_dir) == 0:
-            raise ValueError("build_dir must not be the zero vector")
-        return self
 
 
 PARAMS_MODEL: dict[str, type[_Params]] = {"convert": ConvertParams, "analyze": AnalyzeParams, "refine": RefineParams}

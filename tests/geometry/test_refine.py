@@ -140,7 +140,7 @@ def test_refine_report_selects_by_threshold_and_brackets_the_file_size(tmp_path,
     BRepTools.Write_s(shape, str(path))
     r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(max_chordal=0.03))
     rep = r.report
-    jsonschema.validate(rep, json.loads((Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json").read_text()))
+    jsonschema.validate(rep, json.loads((Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json").read_text(encoding="utf-8")))
     chosen = {f["id"] for f in rep["refined_faces"]}
     assert chosen and all(f["surface_type"] == "sphere" for f in rep["refined_faces"])  # corners: 0.042 > 0.03
     for f in rep["refined_faces"]:
@@ -184,3 +184,13 @@ def test_refine_cli_on_the_users_stl_writes_it_back_in_its_frame(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "amprep", "refine", str(stl), "-o", str(tmp_path / "x.stl")],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and bad.stderr.startswith("amprep: error [invalid_parameter]")
+
+
+def test_refine_cli_summary_on_an_ascii_terminal(tmp_path):
+    import os
+
+    r = subprocess.run([sys.executable, "-m", "amprep", "refine", str(corpus("cq_cube_cylinder_colors.step")), "-o",
+                        str(tmp_path / "r.stl"), "--method", "vta", "--iterations", "2", "--no-compare"],
+                       capture_output=True, timeout=300, env=os.environ | {"PYTHONIOENCODING": "ascii"})
+    assert r.returncode == 0, r.stderr
+    assert b"refined by VTA" in r.stdout and b"52 ? 468 triangles" in r.stdout
