@@ -66,7 +66,11 @@ class MeshChecks:
         return self.boundary_edges == 0 and self.nonmanifold_edges == 0 and self.misoriented_edges == 0
 
 
-def degenerate_mask(mesh: Mesh, rel_eps: float = 1e-12) -> np.ndarray:
+#: a triangle of area ≤ this × (bounding-box diagonal)² is degenerate (its height is near float32 resolution)
+DEGENERATE_REL_AREA = 1e-12
+
+
+def degenerate_mask(mesh: Mesh, rel_eps: float = DEGENERATE_REL_AREA) -> np.ndarray:
     """(m,) bool: a repeated corner index, or area ≤ rel_eps · (bbox diagonal)²."""
     t = mesh.triangles
     repeated = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])

@@ -9,6 +9,7 @@ from OCP.Bnd import Bnd_Box
 from OCP.BRepBndLib import BRepBndLib
 
 from .cad import CadModel
+from .checks import DEGENERATE_REL_AREA
 from .chordal import triangle_chordal_error
 from .errors import AmprepError, ErrorCode
 from .fallback import mesh_face, split_edge_to_tolerance
@@ -93,6 +94,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     prog("meshing", 0.4)
     topo = Topology.of(model.shape)
     n_faces = len(model.faces)
+    min_area = DEGENERATE_REL_AREA * bbox_diagonal(model) ** 2  # what checks.degenerate_mask calls degenerate
     patches: list[FacePatch | None] = []
     fallback: dict[int, str] = {}
     for i, face in enumerate(model.faces):
@@ -103,7 +105,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
         elif p.meshed_by == "occt" and not check_patch_boundary(p):
             fallback[i] = "broken_triangulation"
             p = None
-        elif p.meshed_by == "occt" and _has_zero_area(p):
+        elif p.meshed_by == "occt" and _has_zero_area(p, min_area):
             fallback[i] = "degenerate_triangles"
             p = None
         patches.append(p)
@@ -169,9 +171,10 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     return MeshResult(mesh, tol, face_error, fallback, tuple(sorted(set(unmeshed))))
 
 
-def _has_zero_area(patch: FacePatch, rel_eps: float = 1e-10) -> bool:
+def _has_zero_area(patch: FacePatch, min_area: float = 0.0, rel_eps: float = 1e-10) -> bool:
     """True when a triangle that the weld keeps (three distinct nodes, not two on one B-rep vertex) has
-    area ≤ rel_eps · (its longest edge)² (a needle)."""
+    area ≤ rel_eps · (its longest edge)² (a needle) or ≤ min_area (a sliver thinner than the output's
+    degenerate-triangle check allows)."""
     c = patch.nodes[patch.tris]
     t = patch.tris
     v = patch.node_vertex[t]
@@ -180,7 +183,8 @@ def _has_zero_area(patch: FacePatch, rel_eps: float = 1e-10) -> bool:
     distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
     area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
     longest = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2).max(axis=1)
-    return bool((distinct & (area2 <= 2 * rel_eps * longest**2) & (longest > 0)).any())
+    thin = (area2 <= 2 * rel_eps * longest**2) | (area2 <= 2 * min_area)
+    return bool((distinct & thin & (longest > 0)).any())
 
 
 def _faces_of_edge(model: CadModel, topo: Topology, edge_index: int) -> set[int]:
