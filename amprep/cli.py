@@ -147,7 +147,7 @@ def cmd_refine(args: argparse.Namespace) -> int:
     params = RefineParams(method=args.method, faces=_faces(args.faces), max_chordal=args.max_chordal,
                           max_cusp=args.max_cusp, max_cylindricity=args.max_cylindricity, layer=args.layer,
                           build_dir=_build_dir(args.build_dir), ratios=args.ratios, iterations=args.iterations,
-                          compare=not args.no_compare)
+                          compare=not args.no_compare, max_triangles=args.max_triangles)
     mesh_params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular)
     out = Path(args.output)
     if out.suffix.lower() not in (".stl", ".3mf"):
@@ -307,6 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
     rf.add_argument("--angular", type=float, default=0.5)
     rf.add_argument("--ascii", action="store_true", help="ASCII STL")
     rf.add_argument("--no-compare", action="store_true", help="skip the uniform re-tessellations and the other method")
+    rf.add_argument("--max-triangles", type=int, default=10_000_000,
+                    help="refuse a refinement predicted to output more triangles (default 10,000,000)")
     rf.add_argument("--report", help="write report.json here")
     rf.add_argument("--out-dir", help="write the refined mesh, report, per-triangle error and the PNG plot here")
     rf.add_argument("--quiet", action="store_true")

@@ -78,6 +78,8 @@ class RefineParams(_PrintParams):
                         description="SMA spoke ratio a:b:c and edge ratio p:q:p")
     iterations: int = Field(1, ge=1, le=50, description="VTA iterations")
     compare: bool = Field(True, description="Add uniform re-tessellations and the other method to the report")
+    max_triangles: int = Field(10_000_000, ge=1, le=50_000_000, description="Refuse (output_too_large) a "
+                               "refinement predicted to output more triangles than this")
     format: Literal["stl", "3mf"] = Field("stl", description="Output format")
     ascii: bool = Field(False, description="ASCII STL instead of binary")
 

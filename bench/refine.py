@@ -158,7 +158,7 @@ def write(speed: list[dict], corpus: list[dict]) -> None:
                         r["chordal_after"], "", "", "", r["seconds"]])
         for r in corpus:
             c = r["comparison"]
-            for row in [c["before"], c["refined"], c["other_method"], *c["uniform"]]:
+            for row in [r_ for r_ in [c["before"], c["refined"], c["other_method"], *c["uniform"]] if r_]:
                 w.writerow([r["label"], row["label"], row["triangles"], row["file_size"],
                             (row["chordal_error"] or {}).get("mean"), row.get("profile_error"), row["cusp_height"],
                             row.get("part_cusp_height_box"), ""])
@@ -193,7 +193,7 @@ def write(speed: list[dict], corpus: list[dict]) -> None:
               f"{r['closed_after']}; {r['seconds']:.1f} s in all.", "",
               "| mesh | triangles | STL size (KB) | mean chordal error (mm) | profile error (mm) | cusp t·\\|n·b\\| (refined faces) | box cusp (part) |",
               "|---|---:|---:|---:|---:|---:|---:|"]
-        for row in [c["before"], c["refined"], c["other_method"], *c["uniform"]]:
+        for row in [r_ for r_ in [c["before"], c["refined"], c["other_method"], *c["uniform"]] if r_]:
             L.append(f"| {row['label']} | {row['triangles']:,} | {row['file_size'] / 1000:.0f} | "
                      f"{_fmt((row['chordal_error'] or {}).get('mean'))} | {_fmt(row.get('profile_error'))} | "
                      f"{_fmt(row['cusp_height'])} | {_fmt(row.get('part_cusp_height_box'))} |")

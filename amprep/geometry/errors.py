@@ -18,6 +18,7 @@ class ErrorCode(StrEnum):
     CANCELLED = "cancelled"
     NOT_IMPLEMENTED = "not_implemented"
     STL_MISMATCH = "stl_mismatch"
+    OUTPUT_TOO_LARGE = "output_too_large"
     # Raised by the service around the library (jobs and HTTP), listed here so there is one enum of codes.
     WORKER_CRASHED = "worker_crashed"
     TIME_LIMIT = "time_limit"

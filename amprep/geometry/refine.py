@@ -30,7 +30,7 @@ from .mesher import mesh_model
 from .progress import Progress, ProgressFn
 from .quality import regularity
 from .report import mesh_section
-from .sma import Ratios, Refinement, sma_refine
+from .sma import Ratios, Refinement, sma_output_size, sma_refine
 from .surfaces import Surface, surface_of
 from .tessellate import MeshParams
 from .vta import vta_refine
@@ -58,6 +58,7 @@ class RefineParams:
     compare: bool = True
     compare_vta_iterations: int = 3  # 3 rounds of 1 → 3 give 27× the triangles: SMA's size (27 + 2k per triangle)
     compare_box: bool = True  # the bounding-box cusp height of every compared mesh (slow on big parts)
+    max_triangles: int = 10_000_000  # refuse (output_too_large) a refinement predicted to exceed this
 
     def validate(self) -> None:
         if self.method not in METHODS:
@@ -69,6 +70,8 @@ class RefineParams:
                 raise AmprepError(ErrorCode.INVALID_PARAMETER, f"{name} must be > 0")
         if not 1 <= self.iterations <= 50:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, "iterations must be in 1..50")
+        if self.max_triangles < 1:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "max_triangles must be ≥ 1")
         AnalysisParams(self.layer, self.build_dir, self.sample_order).validate()
 
 
@@ -150,6 +153,14 @@ def _score(mesh: Mesh, surfaces: dict[int, Surface], faces: np.ndarray, params: 
     return row
 
 
+def predicted_size(method: str, mesh: Mesh, faces: np.ndarray, iterations: int) -> int:
+    """Triangles a refinement will output (VTA: every chosen triangle split in three per iteration)."""
+    if method == "sma":
+        return sma_output_size(mesh, faces)
+    n_sel = int(np.isin(mesh.face_ids, faces).sum())
+    return mesh.n_triangles - n_sel + n_sel * 3**iterations
+
+
 def _refine(method: str, mesh: Mesh, faces: np.ndarray, surfaces: dict[int, Surface], params: RefineParams,
             iterations: int) -> Refinement:
     if method == "sma":
@@ -219,6 +230,10 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
     before = faces_section(mesh, ch0, surfaces, ap, quality, n_faces)
     chosen = select_faces(before, params, n_faces)
     faces = np.array(sorted(chosen), dtype=np.int64)
+    size = predicted_size(params.method, mesh, faces, params.iterations)
+    if size > params.max_triangles:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"{params.method.upper()} would output {size:,} triangles, over "
+                          f"the limit of {params.max_triangles:,}: choose fewer faces, fewer iterations or a coarser input")
     prog("refining", 0.45)
     ref = _refine(params.method, mesh, faces, surfaces, params, params.iterations)
     out = ref.mesh
@@ -254,9 +269,11 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
         box = params.compare_box
         this = {"label": params.method.upper()} | _score(out, surfaces, faces, params, box)
         other_method = "vta" if params.method == "sma" else "sma"
-        other = _refine(other_method, mesh, faces, surfaces, params, params.compare_vta_iterations)
         label = other_method.upper() + (f" ({params.compare_vta_iterations} iterations)" if other_method == "vta" else "")
-        other_row = {"label": label} | _score(other.mesh, surfaces, faces, params, box)
+        other_row: dict[str, Any] | None = None
+        if predicted_size(other_method, mesh, faces, params.compare_vta_iterations) <= params.max_triangles:
+            other = _refine(other_method, mesh, faces, surfaces, params, params.compare_vta_iterations)
+            other_row = {"label": label} | _score(other.mesh, surfaces, faces, params, box)
         start = base_tol if base_tol is not None else float(mesh_params.tolerance)
         curve = uniform_curve(model, start, out.n_triangles, surfaces, faces, params, mesh_params) if len(faces) else []
         comparison = {"before": {"label": "input"} | _score(mesh, surfaces, faces, params, box), "refined": this,

@@ -96,6 +96,16 @@ def edge_table(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
     return inverse.reshape(-1, 3), inner
 
 
+def sma_output_size(mesh: Mesh, faces: list[int] | np.ndarray) -> int:
+    """Triangles SMA will output: the untouched ones plus 27 + 2k for each chosen triangle with k contour edges."""
+    sel = np.isin(mesh.face_ids, np.asarray(faces, dtype=np.int64))
+    if not sel.any():
+        return mesh.n_triangles
+    edge_id, inner = edge_table(mesh)
+    k = (~inner[edge_id[sel]]).sum(axis=1)
+    return int((~sel).sum() + (27 + 2 * k).sum())
+
+
 def _nearest_copy(uv: np.ndarray, guess: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
     """uv shifted by whole periods to lie nearest `guess` (both (N, 2))."""
     out = uv.copy()

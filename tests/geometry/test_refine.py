@@ -194,3 +194,23 @@ def test_refine_cli_summary_on_an_ascii_terminal(tmp_path):
                        capture_output=True, timeout=300, env=os.environ | {"PYTHONIOENCODING": "ascii"})
     assert r.returncode == 0, r.stderr
     assert b"refined by VTA" in r.stdout and b"52 ? 468 triangles" in r.stdout
+
+
+def test_a_refinement_over_the_triangle_limit_is_refused_before_it_runs(tmp_path, reference_solids):
+    from OCP.BRepTools import BRepTools
+
+    from amprep.geometry.refine import predicted_size
+    from amprep.geometry.sma import sma_output_size
+
+    mesh, surfaces = _coarse(reference_solids["torus"])
+    assert sma_output_size(mesh, [0]) == sma_refine(mesh, [0], surfaces).mesh.n_triangles
+    assert predicted_size("vta", mesh, np.array([0]), 2) == vta_refine(mesh, [0], surfaces, 2).mesh.n_triangles
+    path = tmp_path / "torus.brep"
+    BRepTools.Write_s(reference_solids["torus"], str(path))
+    for params in (RefineParams(method="vta", iterations=50), RefineParams(max_triangles=10_000)):
+        with pytest.raises(AmprepError) as e:
+            refine_file(path, None, MeshParams(tolerance=0.2), params)
+        assert e.value.code.value == "output_too_large"
+    limit = 3 * mesh.n_triangles  # VTA × 1 fits exactly, the SMA comparison (27×) does not: it is left out
+    r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(method="vta", max_triangles=limit))
+    assert r.report["comparison"]["other_method"] is None and r.mesh.n_triangles == limit
