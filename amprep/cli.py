@@ -147,6 +147,7 @@ def cmd_refine(args: argparse.Namespace) -> int:
     params = RefineParams(method=args.method, faces=_faces(args.faces), max_chordal=args.max_chordal,
                           max_cusp=args.max_cusp, max_cylindricity=args.max_cylindricity, layer=args.layer,
                           build_dir=_build_dir(args.build_dir), ratios=args.ratios, iterations=args.iterations,
+                          target=args.target,
                           compare=not args.no_compare, max_triangles=args.max_triangles)
     mesh_params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular)
     out = Path(args.output)
@@ -292,7 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     rf.add_argument("input", help="STEP/IGES/BREP")
     rf.add_argument("--stl", help="refine this STL made elsewhere (placed on the CAD; written back in its own frame)")
     rf.add_argument("-o", "--output", required=True, help="OUT.stl or OUT.3mf")
-    rf.add_argument("--method", choices=["sma", "vta"], default="sma")
+    rf.add_argument("--method", choices=["sma", "vta", "adaptive"], default="sma")
     rf.add_argument("--faces", help="CAD face ids to refine, e.g. 3,7 (else chosen by the thresholds)")
     rf.add_argument("--max-chordal", type=float, help="refine curved faces whose mean chordal error exceeds this (mm)")
     rf.add_argument("--max-cusp", type=float, help="refine curved faces whose mean cusp height exceeds this (mm)")
@@ -301,6 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
     rf.add_argument("--build-dir", default="0,0,1", help="build direction x,y,z")
     rf.add_argument("--ratios", default="3:4:3,3:4:3", help="SMA spoke a:b:c and edge p:q:p ratios")
     rf.add_argument("--iterations", type=int, default=1, help="VTA iterations")
+    rf.add_argument("--target", type=float, help="adaptive: chordal error to reach (mm; default a tenth of the worst)")
     rf_tol = rf.add_mutually_exclusive_group()
     rf_tol.add_argument("--tolerance", type=float, default=0.2, help="first tessellation's tolerance without --stl (mm)")
     rf_tol.add_argument("--relative", type=float, default=None)

@@ -73,6 +73,7 @@ def run_refine(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Pat
                       max_cylindricity=params.get("max_cylindricity"), layer=params.get("layer", 0.2),
                       build_dir=tuple(params.get("build_dir", (0.0, 0.0, 1.0))),
                       ratios=params.get("ratios", "3:4:3,3:4:3"), iterations=params.get("iterations", 1),
+                      target=params.get("target"),
                       compare=params.get("compare", True), max_triangles=params.get("max_triangles", 10_000_000))
     mp = mesh_params({"tolerance": 0.2} | params)
     r = refine_file(src, stl, mp, rp, progress)

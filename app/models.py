@@ -68,7 +68,8 @@ class RefineParams(_PrintParams):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"method": "sma", "max_chordal": 0.02}]})
 
     tolerance: float = Field(0.2, gt=0, le=100, description="Tolerance of the first tessellation when no STL is given")
-    method: Literal["sma", "vta"] = "sma"
+    method: Literal["sma", "vta", "adaptive"] = Field("sma", description="sma (the thesis), vta (its baseline) "
+                                                      "or adaptive (error-driven edge bisection)")
     faces: list[int] | None = Field(None, description="CAD face ids to refine (else chosen by the thresholds; "
                                     "with no threshold, every curved face)")
     max_chordal: float | None = Field(None, gt=0, description="Refine curved faces whose mean chordal error exceeds this, mm")
@@ -77,6 +78,8 @@ class RefineParams(_PrintParams):
     ratios: str = Field("3:4:3,3:4:3", pattern=r"^\d+(\.\d+)?:\d+(\.\d+)?:\d+(\.\d+)?,\d+(\.\d+)?:\d+(\.\d+)?:\d+(\.\d+)?$",
                         description="SMA spoke ratio a:b:c and edge ratio p:q:p")
     iterations: int = Field(1, ge=1, le=50, description="VTA iterations")
+    target: float | None = Field(None, gt=0, description="adaptive: chordal error every refined triangle must reach, "
+                                 "mm (default: a tenth of the chosen faces' worst)")
     compare: bool = Field(True, description="Add uniform re-tessellations and the other method to the report")
     max_triangles: int = Field(10_000_000, ge=1, le=50_000_000, description="Refuse (output_too_large) a "
                                "refinement predicted to output more triangles than this")

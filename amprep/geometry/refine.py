@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from . import cusp
+from .adaptive import adaptive_refine
 from .analysis import (
     AnalysisParams,
     PlacedStl,
@@ -22,6 +23,7 @@ from .analysis import (
 from .cad import CadModel, read_cad
 from .checks import check_mesh, manifold3d_accepts
 from .convert import provenance, sha256_file
+from .edge_curves import EdgeCurves
 from .errors import AmprepError, ErrorCode
 from .formats import CAD_FORMATS, sniff_path
 from .io_stl import read_stl
@@ -35,7 +37,7 @@ from .surfaces import Surface, surface_of
 from .tessellate import MeshParams
 from .vta import vta_refine
 
-METHODS = ("sma", "vta")
+METHODS = ("sma", "vta", "adaptive")
 STL_HEADER, STL_PER_TRIANGLE = 84, 50  # binary STL bytes
 
 
@@ -54,6 +56,7 @@ class RefineParams:
     build_dir: tuple[float, float, float] = (0.0, 0.0, 1.0)
     ratios: str = "3:4:3,3:4:3"
     iterations: int = 1
+    target: float | None = None  # adaptive: chordal error to reach (default: a tenth of the chosen faces' worst)
     sample_order: int = 6
     compare: bool = True
     compare_vta_iterations: int = 3  # 3 rounds of 1 → 3 give 27× the triangles: SMA's size (27 + 2k per triangle)
@@ -70,6 +73,8 @@ class RefineParams:
                 raise AmprepError(ErrorCode.INVALID_PARAMETER, f"{name} must be > 0")
         if not 1 <= self.iterations <= 50:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, "iterations must be in 1..50")
+        if self.target is not None and not self.target > 0:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "target must be > 0")
         if self.max_triangles < 1:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, "max_triangles must be ≥ 1")
         AnalysisParams(self.layer, self.build_dir, self.sample_order).validate()
@@ -85,7 +90,8 @@ class RefineResult:
     before: Mesh
     report: dict[str, Any]
     chordal: np.ndarray
-    curve: list[dict[str, Any]] = field(default_factory=list)
+    surfaces: dict[int, Surface] = field(default_factory=dict)
+    faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def select_faces(faces_before: list[dict[str, Any]], params: RefineParams, n_faces: int) -> dict[int, str]:
@@ -128,7 +134,7 @@ def _mesh_summary(mesh: Mesh) -> dict[str, Any]:
     return section | {"file_size": STL_HEADER + STL_PER_TRIANGLE * mesh.n_triangles}
 
 
-def _score(mesh: Mesh, surfaces: dict[int, Surface], faces: np.ndarray, params: RefineParams,
+def score_mesh(mesh: Mesh, surfaces: dict[int, Surface], faces: np.ndarray, params: RefineParams,
            box: bool = False) -> dict[str, Any]:
     """Triangles, binary STL size, chordal and profile error (2·max) and approximate cusp height on the chosen faces
     and the whole part; with `box`, the thesis's bounding-box cusp height of the whole part (its Tables 2 and 6)."""
@@ -157,14 +163,19 @@ def predicted_size(method: str, mesh: Mesh, faces: np.ndarray, iterations: int) 
     """Triangles a refinement will output (VTA: every chosen triangle split in three per iteration)."""
     if method == "sma":
         return sma_output_size(mesh, faces)
+    if method == "adaptive":  # stops by itself before its budget
+        return mesh.n_triangles
     n_sel = int(np.isin(mesh.face_ids, faces).sum())
     return mesh.n_triangles - n_sel + n_sel * 3**iterations
 
 
 def _refine(method: str, mesh: Mesh, faces: np.ndarray, surfaces: dict[int, Surface], params: RefineParams,
-            iterations: int) -> Refinement:
+            iterations: int, curves: EdgeCurves | None = None, target: float | None = None) -> Refinement:
     if method == "sma":
         return sma_refine(mesh, faces, surfaces, Ratios.parse(params.ratios))
+    if method == "adaptive":
+        return adaptive_refine(mesh, faces, surfaces, target or 1.0, params.max_triangles,
+                               max(params.sample_order, 3), curves=curves)
     return vta_refine(mesh, faces, surfaces, iterations, max(params.sample_order, 3))
 
 
@@ -180,7 +191,7 @@ def uniform_curve(model: CadModel, start: float, target_triangles: int, surfaces
     for _ in range(max_steps):
         res = mesh_model(model, replace(mesh_params, tolerance=tol, relative=None))
         same = prev is not None and prev.n_triangles == res.mesh.n_triangles and np.array_equal(prev.vertices, res.mesh.vertices)
-        score = dict(rows[-1]) if same else _score(res.mesh, surfaces, faces, params, params.compare_box)
+        score = dict(rows[-1]) if same else score_mesh(res.mesh, surfaces, faces, params, params.compare_box)
         rows.append(score | {"label": f"uniform {tol:.4g} mm", "tolerance": tol})
         prev = res.mesh
         n = res.mesh.n_triangles
@@ -234,8 +245,11 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
     if size > params.max_triangles:
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"{params.method.upper()} would output {size:,} triangles, over "
                           f"the limit of {params.max_triangles:,}: choose fewer faces, fewer iterations or a coarser input")
+    curves = EdgeCurves(model) if placed is None else None  # a user's STL has no B-rep edges behind its vertices
+    worst = max((before[f]["chordal_error"] or {}).get("max", 0.0) for f in faces) if len(faces) else 0.0
+    target = params.target if params.target is not None else (0.1 * worst if worst > 0 else 1.0)
     prog("refining", 0.45)
-    ref = _refine(params.method, mesh, faces, surfaces, params, params.iterations)
+    ref = _refine(params.method, mesh, faces, surfaces, params, params.iterations, curves, target)
     out = ref.mesh
     prog("scoring", 0.55)
     analysis = analyze_mesh(out, ap, surfaces, n_faces, info, None, prog.span(0.55, 0.6))
@@ -267,22 +281,22 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
     if params.compare:
         prog("comparing with uniform tessellations", 0.6)
         box = params.compare_box
-        this = {"label": params.method.upper()} | _score(out, surfaces, faces, params, box)
-        other_method = "vta" if params.method == "sma" else "sma"
+        this = {"label": params.method.upper()} | score_mesh(out, surfaces, faces, params, box)
+        other_method = "vta" if params.method == "sma" else "sma"  # SMA is the reference for VTA and adaptive
         label = other_method.upper() + (f" ({params.compare_vta_iterations} iterations)" if other_method == "vta" else "")
         other_row: dict[str, Any] | None = None
         if predicted_size(other_method, mesh, faces, params.compare_vta_iterations) <= params.max_triangles:
-            other = _refine(other_method, mesh, faces, surfaces, params, params.compare_vta_iterations)
-            other_row = {"label": label} | _score(other.mesh, surfaces, faces, params, box)
+            other = _refine(other_method, mesh, faces, surfaces, params, params.compare_vta_iterations, curves, target)
+            other_row = {"label": label} | score_mesh(other.mesh, surfaces, faces, params, box)
         start = base_tol if base_tol is not None else float(mesh_params.tolerance)
         curve = uniform_curve(model, start, out.n_triangles, surfaces, faces, params, mesh_params) if len(faces) else []
-        comparison = {"before": {"label": "input"} | _score(mesh, surfaces, faces, params, box), "refined": this,
+        comparison = {"before": {"label": "input"} | score_mesh(mesh, surfaces, faces, params, box), "refined": this,
                       "other_method": other_row, "uniform": curve,
                       "note": "chordal_error, profile_error and cusp_height (t·|n·b|) over the refined faces; part_* "
                               "over the whole part (part_cusp_height_box: the thesis's bounding-box method); file_size "
                               "of a binary STL"}
     report = analysis.report
-    report["params"] = {"method": params.method, "faces": list(params.faces) if params.faces is not None else None,
+    report["params"] = {"method": params.method, "target": target if params.method == "adaptive" else None, "faces": list(params.faces) if params.faces is not None else None,
                         "max_chordal": params.max_chordal, "max_cusp": params.max_cusp,
                         "max_cylindricity": params.max_cylindricity, "layer": params.layer,
                         "build_dir": list(params.build_dir), "ratios": params.ratios, "iterations": params.iterations,
@@ -295,4 +309,4 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
         R, t = np.asarray(placed.fit.rotation), np.asarray(placed.fit.translation)
         user_frame = replace(out, vertices=(out.vertices - t) @ R)  # x_user = Rᵀ (x_cad − t)
     prog("done", 1.0)
-    return RefineResult(user_frame, out, mesh, report, ch1)
+    return RefineResult(user_frame, out, mesh, report, ch1, surfaces, faces)

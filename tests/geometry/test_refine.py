@@ -214,3 +214,70 @@ def test_a_refinement_over_the_triangle_limit_is_refused_before_it_runs(tmp_path
     limit = 3 * mesh.n_triangles  # VTA × 1 fits exactly, the SMA comparison (27×) does not: it is left out
     r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(method="vta", max_triangles=limit))
     assert r.report["comparison"]["other_method"] is None and r.mesh.n_triangles == limit
+
+
+@pytest.mark.parametrize("name", ["cylinder", "sphere", "torus", "cone", "bspline_loft", "plate_with_holes"])
+def test_adaptive_reaches_the_target_on_every_triangle_with_fewer_triangles_than_sma(reference_solids, name):
+    from amprep.geometry.adaptive import adaptive_refine
+    from amprep.geometry.edge_curves import EdgeCurves
+    from amprep.geometry.mesh import ON_BREP_EDGE
+
+    model = model_from_shape(reference_solids[name])
+    mesh = mesh_model(model, MeshParams(tolerance=0.2)).mesh
+    surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
+    faces = _curved(surfaces)
+    target = 0.01
+    r = adaptive_refine(mesh, faces, surfaces, target, curves=EdgeCurves(model))
+    out = r.mesh
+    c = check_mesh(out)
+    assert c.closed and manifold3d_accepts(out) and c.degenerate_triangles == 0 and _euler(out) == _euler(mesh)
+    err = face_chordal_errors(out, surfaces, 6)
+    on = np.isin(out.face_ids, faces)
+    assert err[on].max() <= target  # contour edges were split too, on both sides, on the exact B-rep edge
+    assert on.sum() < (sma_refine(mesh, faces, surfaces).mesh.face_ids >= 0).sum()
+    new = np.arange(mesh.n_vertices, out.n_vertices)
+    on_edge = new[out.vertex_dim[new] == ON_BREP_EDGE]
+    if name in ("cylinder", "cone", "plate_with_holes"):  # circles bounding the curved faces got new points
+        assert len(on_edge)
+        from OCP.BRepAdaptor import BRepAdaptor_Curve
+        from OCP.TopoDS import TopoDS
+
+        curves = EdgeCurves(model)
+        for v in on_edge[:20]:
+            e = TopoDS.Edge_s(curves.topo.edges.FindKey(int(out.vertex_entity[v]) + 1))
+            assert np.allclose(BRepAdaptor_Curve(e).Value(float(out.vertex_param[v])).Coord(), out.vertices[v], atol=1e-9)
+
+
+def test_adaptive_without_b_rep_edges_leaves_contour_edges_whole(reference_solids):
+    """The user-STL case (no B-rep edge behind the vertices): only inner edges are split, the other faces' triangles
+    are untouched, and triangles whose error is their contour edge's own sagitta are left alone."""
+    from dataclasses import replace
+
+    from amprep.geometry.adaptive import adaptive_refine
+
+    mesh, surfaces = _coarse(reference_solids["sphere"])
+    no_topology = replace(mesh, vertex_dim=None, vertex_entity=None, vertex_param=None)
+    r = adaptive_refine(no_topology, [0], surfaces, 0.01)
+    assert check_mesh(r.mesh).closed
+    assert face_chordal_errors(r.mesh, surfaces, 6).max() <= 0.01  # a sphere has no contour edge to limit it
+    block, bsurf = _coarse(reference_solids["filleted_block"])
+    curved = _curved(bsurf)
+    r = adaptive_refine(replace(block, vertex_dim=None, vertex_entity=None, vertex_param=None), curved, bsurf, 0.005)
+    flat_before = np.sort(block.triangles[~np.isin(block.face_ids, curved)], axis=1)
+    flat_after = np.sort(r.mesh.triangles[~np.isin(r.mesh.face_ids, curved)], axis=1)
+    assert np.array_equal(np.unique(flat_before, axis=0), np.unique(flat_after, axis=0))
+    assert check_mesh(r.mesh).closed and r.mesh.n_triangles > block.n_triangles
+
+
+def test_refine_adaptive_report(tmp_path, reference_solids):
+    from OCP.BRepTools import BRepTools
+
+    path = tmp_path / "plate.brep"
+    BRepTools.Write_s(reference_solids["plate_with_holes"], str(path))
+    r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(method="adaptive", target=0.005))
+    rep = r.report
+    jsonschema.validate(rep, json.loads((Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json").read_text(encoding="utf-8")))
+    assert rep["method"] == "adaptive" and rep["params"]["target"] == 0.005 and rep["mesh"]["watertight"]
+    assert all(f["chordal_error_after"]["max"] <= 0.005 for f in rep["refined_faces"])
+    assert rep["comparison"]["other_method"]["label"] == "SMA"
+    assert rep["comparison"]["refined"]["triangles"] < rep["comparison"]["other_method"]["triangles"]
