@@ -58,6 +58,20 @@ def _contour_sagitta(corners: np.ndarray, uvs: np.ndarray, fids: np.ndarray, con
     return out
 
 
+def _on_both_faces(curves: EdgeCurves, hit: tuple[int, float], rows: np.ndarray, cols: np.ndarray, uvs: np.ndarray,
+                   fids: np.ndarray, surfaces: dict[int, Surface], tol: float) -> bool:
+    """|S_f(pcurve_f(t)) − C(t)| ≤ tol on the face of each triangle slot (rows, cols) beside the edge: a split there
+    puts the same point on both faces (an edge whose pcurve does not follow its 3D curve is left whole)."""
+    edge, t = hit
+    p = curves.point(edge, t)
+    for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+        near = 0.5 * (uvs[r, c] + uvs[r, (c + 1) % 3])
+        uv = curves.uv(edge, int(fids[r]), t, near)
+        if not np.linalg.norm(surfaces[int(fids[r])].evaluate(uv[None])[0] - p) <= tol:
+            return False
+    return True
+
+
 def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Surface], target: float,
                     max_triangles: int = 10_000_000, order: int = 6, max_rounds: int = 40,
                     curves: EdgeCurves | None = None, by_sagitta: bool = True) -> Refinement:
@@ -77,7 +91,8 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     vpar = mesh.vertex_param if mesh.vertex_param is not None else np.full(mesh.n_vertices, np.nan)
     parent = np.arange(mesh.n_triangles)
     chosen = np.isin(fids, faces)
-    unsplittable: set[tuple[int, int]] = set()  # contour edges with no B-rep edge behind them
+    unsplittable: set[tuple[int, int]] = set()  # contour edges with no B-rep edge behind them, or whose pcurves miss it
+    tol = 0.5 * target  # how far a pcurve's point may lie from the 3D edge's for the split to be taken
     for _ in range(max_rounds):
         current = Mesh(verts, tris, fids, None, vdim, vent, vpar)
         err = _errors(verts, tris, uvs, fids, faces, surfaces, order)
@@ -89,12 +104,15 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         resolved: dict[int, tuple[int, float]] = {}
         if curves is not None:
             r_, c_ = np.nonzero(contour_slots)
+            slot_order = np.argsort(edge_id.ravel(), kind="stable")
+            slot_start = np.searchsorted(edge_id.ravel()[slot_order], np.arange(len(inner)))
             for e, a, b in zip(edge_id[r_, c_].tolist(), tris[r_, c_].tolist(), tris[r_, (c_ + 1) % 3].tolist(), strict=True):
                 key = (min(a, b), max(a, b))
                 if e in resolved or key in unsplittable:
                     continue
                 hit = curves.resolve(current, a, b)
-                if hit is None:
+                sides = slot_order[slot_start[e]:slot_start[e] + 2]
+                if hit is None or not _on_both_faces(curves, hit, sides // 3, sides % 3, uvs, fids, surfaces, tol):
                     unsplittable.add(key)
                 else:
                     resolved[e] = hit
@@ -154,7 +172,8 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
             e = int(eids[j])
             if e in resolved:
                 r, c = slot_rows[j], slot_cols[j]
-                mid_uv[r, c] = curves.uv(resolved[e][0], int(fids[r]), resolved[e][1], own_mid[r, c])  # type: ignore[union-attr]
+                mid_uv[r, c] = curves.uv(resolved[e][0], int(fids[r]), resolved[e][1], own_mid[r, c],  # type: ignore[union-attr]
+                                          surfaces[int(fids[r])].periods)
         inner_slot = ~np.isin(eids, np.fromiter(resolved, np.int64, len(resolved)))
         for f in np.unique(fids[slot_rows[inner_slot]]):
             sel = inner_slot & (fids[slot_rows] == f)

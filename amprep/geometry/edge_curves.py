@@ -37,20 +37,27 @@ class EdgeCurves:
         if mesh.vertex_dim is None or mesh.vertex_entity is None or mesh.vertex_param is None:
             return None
         dim, ent, par = mesh.vertex_dim, mesh.vertex_entity, mesh.vertex_param
+        length = float(np.linalg.norm(mesh.vertices[a] - mesh.vertices[b]))
         if dim[a] == ON_BREP_EDGE and dim[b] == ON_BREP_EDGE:
             if ent[a] != ent[b]:
                 return None
-            return int(ent[a]), 0.5 * (float(par[a]) + float(par[b]))
+            e, t = int(ent[a]), 0.5 * (float(par[a]) + float(par[b]))
+            mid = 0.5 * (mesh.vertices[a] + mesh.vertices[b])
+            return (e, t) if np.linalg.norm(self.point(e, t) - mid) <= length else None  # not two neighbours on it
         if ON_BREP_EDGE not in (dim[a], dim[b]) or ON_BREP_VERTEX not in (dim[a], dim[b]):
             return None
         on_edge, at_vertex = (a, b) if dim[a] == ON_BREP_EDGE else (b, a)
         e, t = int(ent[on_edge]), float(par[on_edge])
         v1, t1, v2, t2 = self.ends(e)
-        roots = {self.topo.root(v1): t1, self.topo.root(v2): t2}
-        ends = [tv for v, tv in ((v1, t1), (v2, t2)) if self.topo.root(v) == self.topo.root(int(ent[at_vertex]))]
-        if not ends or not roots:
+        # the end the mesh edge runs to: by position (an edge whose two B-rep vertices almost coincide, or a closed
+        # edge, has both ends there; then the end nearer in parameter), not by vertex identity, which a weld may
+        # have merged
+        x = mesh.vertices[at_vertex]
+        d = [float(np.linalg.norm(self.point(e, tv) - x)) for tv in (t1, t2)]
+        if min(d) > 0.5 * length:
             return None
-        tv = min(ends, key=lambda x: abs(x - t))  # a closed edge has its vertex at both ends: the nearer one
+        ends = [tv for tv, dv in zip((t1, t2), d, strict=True) if dv <= min(d) + 0.1 * length]
+        tv = min(ends, key=lambda x: abs(x - t))
         return e, 0.5 * (t + tv)
 
     def point(self, e: int, t: float) -> np.ndarray:
@@ -58,8 +65,10 @@ class EdgeCurves:
             self._curve[e] = BRepAdaptor_Curve(self._edge(e))
         return np.array(self._curve[e].Value(t).Coord())
 
-    def uv(self, e: int, face: int, t: float, near: np.ndarray) -> np.ndarray:
-        """(u, v) of the edge's point at t on the face, from its pcurve(s) (a seam has two: the one nearer `near`)."""
+    def uv(self, e: int, face: int, t: float, near: np.ndarray,
+           periods: tuple[float | None, float | None] = (None, None)) -> np.ndarray:
+        """(u, v) of the edge's point at t on the face, from its pcurve(s) (a seam has two: the one nearer `near`),
+        shifted by whole periods of a periodic surface to the copy nearest `near`."""
         key = (e, face)
         if key not in self._pcurve:
             f = self.model.faces[face]
@@ -70,7 +79,12 @@ class EdgeCurves:
                 if c is not None:
                     curves.append(c)
             self._pcurve[key] = curves
+        near = np.asarray(near, float)
         pts = [np.array(c.Value(t).Coord()) for c in self._pcurve[key]]
         if not pts:
-            return np.asarray(near, float)
+            return near
+        for p in pts:
+            for d, per in enumerate(periods):
+                if per:
+                    p[d] += np.round((near[d] - p[d]) / per) * per
         return min(pts, key=lambda p: float(np.linalg.norm(p - near)))

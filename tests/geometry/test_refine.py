@@ -281,3 +281,28 @@ def test_refine_adaptive_report(tmp_path, reference_solids):
     assert all(f["chordal_error_after"]["max"] <= 0.005 for f in rep["refined_faces"])
     assert rep["comparison"]["other_method"]["label"] == "SMA"
     assert rep["comparison"]["refined"]["triangles"] < rep["comparison"]["other_method"]["triangles"]
+
+
+def test_adaptive_on_real_edges_that_wrap_a_periodic_face_and_stray_from_their_pcurves():
+    """NIST CTC-02: face 54 is a periodic B-spline whose boundary edge winds once round it (its pcurve runs a whole
+    period, its two B-rep vertices 1e-5 mm apart) and face 35's edge strays 0.006 mm from its pcurve: every contour
+    split must land on the right period and the right end, so the error falls under the target on every triangle,
+    the part stays closed and no B-rep edge point is made twice."""
+    from amprep.geometry.adaptive import adaptive_refine
+    from amprep.geometry.cad import read_cad
+    from amprep.geometry.edge_curves import EdgeCurves
+    from amprep.geometry.mesh import ON_BREP_EDGE
+
+    model = read_cad(corpus("nist_ctc02_ap242.stp"))
+    mesh = mesh_model(model, MeshParams(tolerance=0.2)).mesh
+    faces = [35, 54]
+    surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
+    target = 0.02
+    out = adaptive_refine(mesh, faces, surfaces, target, curves=EdgeCurves(model)).mesh
+    err, err0 = face_chordal_errors(out, surfaces, 6), face_chordal_errors(mesh, surfaces, 6)
+    assert err[np.isin(out.face_ids, faces)].max() <= target < err0[np.isin(mesh.face_ids, faces)].max()
+    c = check_mesh(out)
+    assert c.closed and c.degenerate_triangles == 0 and out.n_triangles > mesh.n_triangles
+    on = out.vertex_dim == ON_BREP_EDGE
+    pairs = np.stack([out.vertex_entity[on], out.vertex_param[on]], axis=1)
+    assert len(np.unique(pairs, axis=0)) == len(pairs)
