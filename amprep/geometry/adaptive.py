@@ -23,7 +23,7 @@ def _errors(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarr
     for f in faces:
         t = np.flatnonzero(fids == f)
         if len(t):
-            err[t] = triangle_chordal_error(verts[tris[t]], uvs[t], surfaces[int(f)].evaluate, order)
+            err[t] = triangle_chordal_error(verts[tris[t]], uvs[t], surfaces[int(f)], order)
     return err
 
 

@@ -83,7 +83,7 @@ def face_chordal_errors(mesh: Mesh, surfaces: dict[int, Surface], order: int) ->
         info = mesh.faces[fid] if fid < len(mesh.faces) else None
         if info is not None and info.meshed_by == "stored":
             continue
-        out[tris] = triangle_chordal_error(corners[tris], mesh.uv[tris], surf.evaluate, order, affine=surf.affine)
+        out[tris] = triangle_chordal_error(corners[tris], mesh.uv[tris], surf, order, affine=surf.affine)
     return out
 
 

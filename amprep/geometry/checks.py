@@ -79,12 +79,13 @@ def degenerate_mask(mesh: Mesh, rel_eps: float = DEGENERATE_REL_AREA) -> np.ndar
     return repeated | (triangle_areas(mesh.corners) <= rel_eps * scale * scale)
 
 
-def shell_labels(mesh: Mesh) -> tuple[int, np.ndarray]:
-    """(number of shells, (m,) label per triangle): triangles joined through shared edges."""
+def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.ndarray]:
+    """(number of shells, (m,) label per triangle): triangles joined through shared edges (`inc`: the mesh's edge
+    table when already made)."""
     m = mesh.n_triangles
     if m == 0:
         return 0, np.zeros(0, np.int64)
-    inc = edge_incidence(mesh.triangles)
+    inc = inc if inc is not None else edge_incidence(mesh.triangles)
     tri = np.repeat(np.arange(m), 3)
     edge = inc.edge_of.reshape(-1)
     graph = coo_matrix((np.ones(len(tri)), (tri, edge + m)), shape=(m + len(inc.edges),) * 2)
@@ -92,6 +93,17 @@ def shell_labels(mesh: Mesh) -> tuple[int, np.ndarray]:
     labels = labels[:m]
     _, labels = np.unique(labels, return_inverse=True)
     return int(labels.max()) + 1, labels
+
+
+def duplicate_count(triangles: np.ndarray) -> int:
+    """Triangles whose vertex set repeats an earlier triangle's: (m, 3) sorted per row, rows lexsorted, equal
+    neighbours counted."""
+    if len(triangles) < 2:
+        return 0
+    srt = np.sort(triangles, axis=1)
+    order = np.lexsort((srt[:, 2], srt[:, 1], srt[:, 0]))
+    srt = srt[order]
+    return int((srt[1:] == srt[:-1]).all(axis=1).sum())
 
 
 def check_mesh(mesh: Mesh) -> MeshChecks:
@@ -102,18 +114,18 @@ def check_mesh(mesh: Mesh) -> MeshChecks:
     boundary = int((inc.count == 1).sum())
     nonmanifold = int((inc.count > 2).sum())
     misoriented = int(((inc.count == 2) & (inc.forward != 1)).sum())
-    srt = np.sort(mesh.triangles, axis=1)
-    duplicates = len(srt) - len(np.unique(srt, axis=0))
     corners = mesh.corners
-    shells, _ = shell_labels(mesh)
+    shells, _ = shell_labels(mesh, inc)
+    used = np.zeros(max(mesh.n_vertices, int(mesh.triangles.max()) + 1), bool)
+    used[mesh.triangles] = True
     return MeshChecks(
         triangles=mesh.n_triangles,
-        vertices=int(len(np.unique(mesh.triangles))),
+        vertices=int(used.sum()),
         boundary_edges=boundary,
         nonmanifold_edges=nonmanifold,
         misoriented_edges=misoriented,
         degenerate_triangles=int(degenerate_mask(mesh).sum()),
-        duplicate_triangles=int(duplicates),
+        duplicate_triangles=duplicate_count(mesh.triangles),
         shells=shells,
         volume=signed_volume(corners),
         area=float(triangle_areas(corners).sum()),

@@ -7,7 +7,12 @@ from functools import lru_cache
 
 import numpy as np
 
+from . import bspline as _bspline
+from .bspline import COMPILED_MIN_POINTS
+from .surfaces import Surface
+
 _CHUNK_POINTS = 1_000_000
+_kernels = None  # the _chordal_kernel module once loaded
 
 
 @lru_cache(maxsize=32)
@@ -26,19 +31,58 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
     return np.linalg.norm(exact - corners, axis=2).max(axis=1)
 
 
+def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray) -> np.ndarray | None:
+    """ε_T by the fused, threaded kernel of _chordal_kernel.py, or None where the surface has none (OCCT-evaluated
+    kinds) or the call is too small to pay numba's start-up before the kernel is loaded."""
+    global _kernels
+    kind = surface.closed_form
+    d = surface.data if surface.surface_type in ("bspline", "bezier") else None
+    if kind is None and d is None:
+        return None
+    if _kernels is None:
+        if len(corners) * len(w) < COMPILED_MIN_POINTS and not _bspline.kernel_loaded():
+            return None
+        from . import _chordal_kernel
+
+        _kernels = _chordal_kernel
+        _bspline.load_kernel()
+    out = np.empty(len(corners))
+    corners = np.ascontiguousarray(corners, dtype=np.float64)
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    if kind is not None:
+        _kernels.analytic_chordal_kernel(kind[0], kind[1], corners, uv, w, out)
+    else:
+        assert d is not None
+        if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
+            d["_pw"] = np.ascontiguousarray(np.concatenate([d["poles"] * d["weights"][..., None],
+                                                            d["weights"][..., None]], axis=2))
+        pw = d["_pw"]
+        per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
+        _kernels.bspline_chordal_kernel(pw, np.ascontiguousarray(d["uknots"], dtype=np.float64),
+                                        np.ascontiguousarray(d["vknots"], dtype=np.float64), int(d["udeg"]),
+                                        int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w), out)
+    return out
+
+
 def triangle_chordal_error(
-    corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray], np.ndarray], order: int = 6,
+    corners: np.ndarray, uv: np.ndarray, surface: Surface | Callable[[np.ndarray], np.ndarray], order: int = 6,
     affine: bool = False,
 ) -> np.ndarray:
     """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v);
-    corners (m, 3, 3) mm, uv (m, 3, 2) on the surface `evaluate` ((N, 2) → (N, 3)). Zero-area: 0.
-    affine=True (planes): the corner bound of affine_chordal_bound instead of sampling."""
+    corners (m, 3, 3) mm, uv (m, 3, 2) on `surface` (a Surface, or its evaluate: (N, 2) → (N, 3)). Zero-area: 0.
+    affine=True (planes): the corner bound of affine_chordal_bound instead of sampling. A Surface with a closed
+    form or B-spline data is measured by the compiled kernel on large calls (same samples, same result)."""
     m = len(corners)
     if m == 0:
         return np.zeros(0)
+    evaluate = surface.evaluate if isinstance(surface, Surface) else surface
     if affine:
         return affine_chordal_bound(corners, uv, evaluate)
     w = barycentric_grid(order)
+    if isinstance(surface, Surface):
+        fast = _compiled(surface, corners, uv, w)
+        if fast is not None:
+            return fast
     normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     norm = np.linalg.norm(normal, axis=1)
     unit = np.divide(normal, norm[:, None], out=np.zeros_like(normal), where=norm[:, None] > 0)

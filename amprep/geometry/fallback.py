@@ -172,7 +172,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
             seen = known_code[pos] == code
             err[seen] = known_err[pos[seen]]
         fresh = ~seen
-        err[fresh] = triangle_chordal_error(xyz[tris[fresh]], uv[tris[fresh]], surface.evaluate, order, affine=affine)
+        err[fresh] = triangle_chordal_error(xyz[tris[fresh]], uv[tris[fresh]], surface, order, affine=affine)
         if code is not None:
             order_ = np.argsort(code)
             known_code, known_err = code[order_], err[order_]
@@ -188,7 +188,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     if len(xyz) < len(pts):
         xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
     if final_err is None:  # rounds ran out after a last insertion: measure the triangles kept
-        final_err = triangle_chordal_error(xyz[tris], uv[tris], surface.evaluate, order, affine=affine)
+        final_err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, affine=affine)
     k = len(pts)
     if face.Orientation() == TopAbs_REVERSED:
         tris = tris[:, [0, 2, 1]]

@@ -20,6 +20,7 @@ from .tessellate import (
     FacePatch,
     MeshParams,
     Topology,
+    bulk_triangulation_arrays,
     check_patch_boundary,
     extract_patch,
     face_edges,
@@ -78,7 +79,7 @@ def patch_error(patch: FacePatch, surface: Surface | None, order: int) -> np.nda
         return np.full(len(patch.tris), np.nan)
     if patch.error is not None:  # the fallback mesher measured its own triangles
         return patch.error
-    return triangle_chordal_error(patch.nodes[patch.tris], patch.uv[patch.tris], surface.evaluate, order,
+    return triangle_chordal_error(patch.nodes[patch.tris], patch.uv[patch.tris], surface, order,
                                   affine=surface.affine)
 
 
@@ -97,9 +98,10 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     min_area = DEGENERATE_REL_AREA * bbox_diagonal(model) ** 2  # what checks.degenerate_mask calls degenerate
     patches: list[FacePatch | None] = []
     fallback: dict[int, str] = {}
+    bulk = bulk_triangulation_arrays(model.faces) if not params.force_fallback else [None] * n_faces
     for i, face in enumerate(model.faces):
         prog("meshing", 0.4 + 0.1 * i / max(n_faces, 1))
-        p = None if params.force_fallback else extract_patch(i, face, topo)
+        p = None if params.force_fallback else extract_patch(i, face, topo, bulk[i])
         if p is None:
             fallback[i] = "forced" if params.force_fallback else "no_triangulation"
         elif p.meshed_by == "occt" and not check_patch_boundary(p):

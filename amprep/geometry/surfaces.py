@@ -51,6 +51,7 @@ class Surface:
     data: dict | None = None
     periods: tuple[float | None, float | None] = (None, None)  # period of u and of v where periodic
     bounds: tuple[float, float, float, float] | None = None  # (u1, u2, v1, v2) of the face
+    closed_form: tuple[int, np.ndarray] | None = None  # (kind, O X Y Z a b) for the compiled chordal kernel
 
     @property
     def affine(self) -> bool:
@@ -133,6 +134,11 @@ def wrap_periodic(uv: np.ndarray, uperiod: tuple[float, float] | None, vperiod: 
     return out
 
 
+def _closed_form(kind: int, frame: tuple[np.ndarray, ...], a: float = 0.0, b: float = 0.0) -> tuple[int, np.ndarray]:
+    """(kind, (14,) O X Y Z a b): the compiled kernel's description of a closed-form surface (_chordal_kernel.py)."""
+    return kind, np.concatenate([*frame, [a, b]]).astype(np.float64)
+
+
 def _occt_loop(adaptor: BRepAdaptor_Surface) -> Callable[[np.ndarray], np.ndarray]:
     def f(uv: np.ndarray) -> np.ndarray:
         return np.array([adaptor.Value(u, v).Coord() for u, v in uv], dtype=float).reshape(-1, 3)
@@ -154,21 +160,27 @@ def _surface(ad: BRepAdaptor_Surface) -> Surface:
     kind = ad.GetType()
     name = SURFACE_TYPES.get(kind, "other")
     if kind == GeomAbs_Plane:
-        o, x, y, _ = _frame(ad.Plane().Position())
-        return Surface(name, plane(o, x, y))
+        o, x, y, z = _frame(ad.Plane().Position())
+        return Surface(name, plane(o, x, y), closed_form=_closed_form(0, (o, x, y, z)))
     if kind == GeomAbs_Cylinder:
         c = ad.Cylinder()
         o, x, y, z = _frame(c.Position())
-        return Surface(name, cylinder(o, x, y, z, c.Radius()), data=dict(radius=c.Radius(), origin=o, axis=z))
+        return Surface(name, cylinder(o, x, y, z, c.Radius()), data=dict(radius=c.Radius(), origin=o, axis=z),
+                       closed_form=_closed_form(1, (o, x, y, z), c.Radius()))
     if kind == GeomAbs_Cone:
         c = ad.Cone()
-        return Surface(name, cone(*_frame(c.Position()), c.RefRadius(), c.SemiAngle()))
+        fr = _frame(c.Position())
+        return Surface(name, cone(*fr, c.RefRadius(), c.SemiAngle()),
+                       closed_form=_closed_form(2, fr, c.RefRadius(), c.SemiAngle()))
     if kind == GeomAbs_Sphere:
         s = ad.Sphere()
-        return Surface(name, sphere(*_frame(s.Position()), s.Radius()))
+        fr = _frame(s.Position())
+        return Surface(name, sphere(*fr, s.Radius()), closed_form=_closed_form(3, fr, s.Radius()))
     if kind == GeomAbs_Torus:
         t = ad.Torus()
-        return Surface(name, torus(*_frame(t.Position()), t.MajorRadius(), t.MinorRadius()))
+        fr = _frame(t.Position())
+        return Surface(name, torus(*fr, t.MajorRadius(), t.MinorRadius()),
+                       closed_form=_closed_form(4, fr, t.MajorRadius(), t.MinorRadius()))
     if kind in (GeomAbs_BSplineSurface, GeomAbs_BezierSurface):
         geom = ad.BSpline() if kind == GeomAbs_BSplineSurface else GeomConvert.SurfaceToBSplineSurface_s(ad.Bezier())
         d = bspline_data(geom)

@@ -8,10 +8,12 @@ meshed inconsistently with their edges, are meshed again from the shared edge di
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass, field
 
 import numpy as np
-from OCP.BRep import BRep_Tool
+from OCP.BinTools import BinTools, BinTools_FormatVersion
+from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepMesh import BRepMesh_IncrementalMesh
 from OCP.BRepTools import BRepTools
 from OCP.IMeshTools import (
@@ -22,7 +24,7 @@ from OCP.IMeshTools import (
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
-from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from .errors import AmprepError, ErrorCode
@@ -96,6 +98,50 @@ def triangulation_arrays(tri) -> tuple[np.ndarray, np.ndarray | None, np.ndarray
           if tri.HasUVNodes() else None)
     tris = np.array([tri.Triangle(i).Get() for i in range(1, t + 1)], dtype=np.int64).reshape(t, 3) - 1
     return nodes, uv, tris
+
+
+def bulk_triangulation_arrays(faces: list[TopoDS_Face]) -> list[tuple[np.ndarray, np.ndarray | None, np.ndarray] | None]:
+    """triangulation_arrays of every face (None: no triangulation) in one pass through OCCT's binary BREP writer:
+    copies of the triangulations on bare faces are written to memory (VERSION_3: int32 node and triangle counts,
+    a UV flag byte, the deflection, nodes, (u,v), 1-based triangles; native byte order) and read by np.frombuffer.
+    A face whose counts in the stream disagree with its triangulation's is read node by node."""
+    tris = [BRep_Tool.Triangulation_s(f, TopLoc_Location()) for f in faces]
+    builder, comp = BRep_Builder(), TopoDS_Compound()
+    builder.MakeCompound(comp)
+    present = [i for i, t in enumerate(tris) if t is not None and t.NbTriangles() > 0]
+    for i in present:  # a copy each: the writer keeps one entry per distinct triangulation (instanced solids share)
+        f = TopoDS_Face()
+        builder.MakeFace(f, tris[i].Copy())
+        builder.Add(comp, f)
+    buf = io.BytesIO()
+    BinTools.Write_s(comp, buf, True, False, BinTools_FormatVersion.BinTools_FormatVersion_VERSION_3)
+    data = buf.getbuffer()
+    out: list[tuple[np.ndarray, np.ndarray | None, np.ndarray] | None] = [None] * len(faces)
+    head = bytes(data[:4096])
+    at = head.find(b"\nTriangulations ")
+    count = int(head[at + 16:head.index(b"\n", at + 1)]) if at >= 0 else -1
+    pos = head.index(b"\n", at + 1) + 1 if at >= 0 else 0
+    ok = count == len(present)
+    for i in present:
+        t = tris[i]
+        k, m = t.NbNodes(), t.NbTriangles()
+        if ok:
+            nn, nt = np.frombuffer(data, "=i4", 2, pos)
+            ok = (int(nn), int(nt)) == (k, m) and bool(data[pos + 8]) == t.HasUVNodes()
+        if not ok:  # not the layout expected: the slow, exact reader
+            out[i] = triangulation_arrays(t)
+            continue
+        pos += 17
+        nodes = np.frombuffer(data, "=f8", 3 * k, pos).reshape(k, 3).copy()
+        pos += 24 * k
+        uv = None
+        if t.HasUVNodes():
+            uv = np.frombuffer(data, "=f8", 2 * k, pos).reshape(k, 2).copy()
+            pos += 16 * k
+        out[i] = nodes, uv, np.frombuffer(data, "=i4", 3 * m, pos).reshape(m, 3).astype(np.int64) - 1
+        pos += 12 * m
+    del data
+    return out
 
 
 @dataclass
@@ -181,13 +227,15 @@ def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
     return explore(face, TopAbs_EDGE, TopoDS.Edge_s)
 
 
-def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology) -> FacePatch | None:
-    """A face's OCCT triangulation as a FacePatch with edge keys, or None when it has none or a broken one."""
+def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology,
+                  arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray] | None = None) -> FacePatch | None:
+    """A face's OCCT triangulation as a FacePatch with edge keys, or None when it has none or a broken one
+    (`arrays`: its triangulation_arrays when already read in bulk)."""
     loc = TopLoc_Location()
     tri = BRep_Tool.Triangulation_s(face, loc)
     if tri is None or tri.NbTriangles() == 0:
         return None
-    nodes, uv, tris = triangulation_arrays(tri)
+    nodes, uv, tris = arrays if arrays is not None else triangulation_arrays(tri)
     k = len(nodes)
     if tris.min(initial=0) < 0 or tris.max(initial=0) >= k:
         return None

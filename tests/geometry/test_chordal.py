@@ -33,3 +33,41 @@ def test_plane_bound_is_zero_on_the_plane_and_the_offset_off_it():
     lifted = corners + [0, 0, 0.25]
     assert triangle_chordal_error(lifted, uv, s, affine=True)[0] == pytest.approx(0.25)
     assert triangle_chordal_error(lifted, uv, s)[0] == pytest.approx(0.25)  # sampling agrees
+
+
+def _faces_of(model, mesh):
+    from amprep.geometry.surfaces import surface_of
+
+    for f in np.unique(mesh.face_ids):
+        sel = mesh.face_ids == f
+        yield surface_of(model.faces[int(f)]), mesh.corners[sel], mesh.uv[sel]
+
+
+@pytest.mark.parametrize("source", ["reference", "nist_ctc02_ap242.stp"])
+def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(reference_solids, source):
+    """The fused numba kernels (closed forms; rational B-splines with periodic wrap, CTC-02's face 54) against the
+    numpy evaluate-then-project path, on every face, forced on small calls; and they do run there."""
+    from amprep.geometry import chordal
+    from amprep.geometry.cad import model_from_shape, read_cad
+    from amprep.geometry.mesher import mesh_model
+    from amprep.geometry.tessellate import MeshParams
+    from tests.conftest import corpus
+
+    models = ([model_from_shape(s) for s in reference_solids.values()] if source == "reference"
+              else [read_cad(corpus(source))])
+    w = barycentric_grid(6)
+    from amprep.geometry import _chordal_kernel
+
+    chordal._kernels = _chordal_kernel  # loaded: every call of any size takes the compiled path
+    kinds = set()
+    for model in models:
+        mesh = mesh_model(model, MeshParams(tolerance=0.2)).mesh
+        for surf, corners, uv in _faces_of(model, mesh):
+            fast = chordal._compiled(surf, corners, uv, w)
+            slow = triangle_chordal_error(corners, uv, surf.evaluate, 6)
+            if surf.surface_type in ("plane", "cylinder", "cone", "sphere", "torus", "bspline"):
+                assert fast is not None
+                kinds.add(surf.surface_type)
+                np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-9)
+    assert kinds >= ({"plane", "cylinder", "cone", "sphere", "torus", "bspline"} if source == "reference"
+                     else {"plane", "cylinder", "bspline"})

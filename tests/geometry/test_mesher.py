@@ -155,3 +155,33 @@ def test_slivers_thinner_than_the_degenerate_check_send_the_face_to_the_fallback
     assert not _has_zero_area(patch)  # not a needle by the triangle's own proportions
     assert _has_zero_area(patch, DEGENERATE_REL_AREA * diag**2)
     assert not _has_zero_area(patch, DEGENERATE_REL_AREA * 100.0**2)  # on a 100 mm part it is a fine triangle
+
+
+@pytest.mark.parametrize("name", ["as1_assembly_ap214.stp", "nist_ctc02_ap242.stp", "featuretype_inch_ap214.step"])
+def test_bulk_triangulation_read_equals_the_node_by_node_read(name, monkeypatch):
+    """The binary-stream reader returns exactly what OCCT's accessors give, face by face (an assembly's instanced
+    solids share triangulations; every face still gets its own), without falling back to the slow reader."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopLoc import TopLoc_Location
+
+    from amprep.geometry import tessellate
+    from amprep.geometry.cad import read_cad
+    from amprep.geometry.tessellate import bulk_triangulation_arrays, run_brepmesh, triangulation_arrays
+
+    model = read_cad(corpus(name))
+    run_brepmesh(model.shape, 0.05, MeshParams(tolerance=0.05))
+    slow = []
+    monkeypatch.setattr(tessellate, "triangulation_arrays", lambda t: slow.append(t))
+    bulk = bulk_triangulation_arrays(model.faces)
+    monkeypatch.undo()
+    assert not slow
+    assert len(bulk) == len(model.faces) and sum(b is not None for b in bulk) > 0
+    for face, got in zip(model.faces, bulk, strict=True):
+        tri = BRep_Tool.Triangulation_s(face, TopLoc_Location())
+        if tri is None or tri.NbTriangles() == 0:
+            assert got is None
+            continue
+        want = triangulation_arrays(tri)
+        assert got is not None
+        for a, b in zip(got, want, strict=True):
+            assert (a is None and b is None) or np.array_equal(a, b)
