@@ -25,5 +25,5 @@ def _preload(**_: object) -> None:
     import importlib
 
     for name in ("amprep.runner", "amprep.geometry.convert", "amprep.geometry.report", "amprep.geometry.fallback",
-                 "manifold3d", "lib3mf", "triangle", "scipy.sparse.csgraph"):
+                 "manifold3d", "lib3mf", "triangle", "scipy.sparse.csgraph", "numba"):
         importlib.import_module(name)

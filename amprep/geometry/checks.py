@@ -91,7 +91,9 @@ def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.
     graph = coo_matrix((np.ones(len(tri)), (tri, edge + m)), shape=(m + len(inc.edges),) * 2)
     n, labels = connected_components(graph, directed=False)
     labels = labels[:m]
-    _, labels = np.unique(labels, return_inverse=True)
+    present = np.zeros(n, bool)
+    present[labels] = True
+    labels = (np.cumsum(present) - 1)[labels]  # components renumbered 0.. in order, as np.unique would
     return int(labels.max()) + 1, labels
 
 

@@ -76,7 +76,9 @@ class Mesh:
         if self.n_triangles == 0:
             z = np.zeros(3)
             return z, z
-        used = self.vertices[np.unique(self.triangles)]
+        mask = np.zeros(self.n_vertices, bool)
+        mask[self.triangles] = True
+        used = self.vertices[mask]
         return used.min(axis=0), used.max(axis=0)
 
     def with_arrays(self, **changes: object) -> Mesh:

@@ -27,20 +27,29 @@ def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np
     n = len(nodes)
     dim = np.full(n, IN_FACE, np.int8)
     entity = np.concatenate([np.full(len(p.nodes), p.face_id, np.int64) for p in patches])
-    key = np.zeros((n, 4))  # (category, a, b, c): rows equal ⇔ same mesh vertex
     on_v = vert >= 0
     on_e = (~on_v) & (edge >= 0)
     free_stored = (~on_v) & (~on_e) & stored
     interior = (~on_v) & (~on_e) & (~stored)
-    key[on_v, 0], key[on_v, 1] = 0, vert[on_v]
-    key[on_e, 0], key[on_e, 1], key[on_e, 2] = 1, edge[on_e], param[on_e]
-    key[free_stored, 0] = 2
-    key[free_stored, 1:] = nodes[free_stored]
-    key[interior, 0], key[interior, 1] = 3, np.flatnonzero(interior)
     dim[on_v], entity[on_v] = ON_BREP_VERTEX, vert[on_v]
     dim[on_e], entity[on_e] = ON_BREP_EDGE, edge[on_e]
-    _, first, gid = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    gid = gid.reshape(-1)
+    # one mesh vertex per B-rep vertex, per (B-rep edge, parameter), per stored coordinate, per interior node
+    gid = np.empty(n, np.int64)
+    firsts: list[np.ndarray] = []
+    base = 0
+    for mask, key in ((on_v, vert[:, None]), (on_e, np.stack([edge, param], axis=1)), (free_stored, nodes),
+                      (interior, None)):
+        idx = np.flatnonzero(mask)
+        if key is None:
+            gid[idx] = base + np.arange(len(idx))
+            firsts.append(idx)
+            base += len(idx)
+            continue
+        _, f, inv = np.unique(key[idx], axis=0, return_index=True, return_inverse=True)
+        gid[idx] = base + inv.reshape(-1)
+        firsts.append(idx[f])
+        base += len(f)
+    first = np.concatenate(firsts)
 
     tris = np.concatenate([gid[p.tris + o] for p, o in zip(patches, offsets, strict=False)])
     face_ids = np.concatenate([np.full(len(p.tris), p.face_id, np.int32) for p in patches])
@@ -49,7 +58,7 @@ def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np
     ])
     keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
     tris, face_ids, uv = tris[keep], face_ids[keep], uv[keep]
-    used = np.unique(tris)
+    used = np.flatnonzero(np.bincount(tris.reshape(-1), minlength=len(first)))
     remap = np.full(len(first), -1, np.int64)
     remap[used] = np.arange(len(used))
     src = first[used]
