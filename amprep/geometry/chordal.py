@@ -8,11 +8,23 @@ from functools import lru_cache
 import numpy as np
 
 from . import bspline as _bspline
-from .bspline import COMPILED_MIN_POINTS
 from .surfaces import Surface
 
 _CHUNK_POINTS = 1_000_000
 _kernels = None  # the _chordal_kernel module once loaded
+#: numba's start-up (~0.6 s per process) pays for itself from about 100k triangles at order 6 (the kernels run
+#: ~3× numpy's speed on 2 cores); a call this large loads them, and so does load_kernels() for a large job
+COMPILED_MIN_POINTS = 3_000_000
+
+
+def load_kernels() -> None:
+    """Load the compiled kernels now (mesh_model does when the whole part is large): every later call uses them."""
+    global _kernels
+    if _kernels is None:
+        from . import _chordal_kernel
+
+        _kernels = _chordal_kernel
+        _bspline.load_kernel()
 
 
 @lru_cache(maxsize=32)
@@ -34,7 +46,6 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
 def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray) -> np.ndarray | None:
     """ε_T by the fused, threaded kernel of _chordal_kernel.py, or None where the surface has none (OCCT-evaluated
     kinds) or the call is too small to pay numba's start-up before the kernel is loaded."""
-    global _kernels
     kind = surface.closed_form
     d = surface.data if surface.surface_type in ("bspline", "bezier") else None
     if kind is None and d is None:
@@ -42,10 +53,8 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
     if _kernels is None:
         if len(corners) * len(w) < COMPILED_MIN_POINTS and not _bspline.kernel_loaded():
             return None
-        from . import _chordal_kernel
-
-        _kernels = _chordal_kernel
-        _bspline.load_kernel()
+        load_kernels()
+    assert _kernels is not None
     out = np.empty(len(corners))
     corners = np.ascontiguousarray(corners, dtype=np.float64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)

@@ -185,3 +185,24 @@ def test_bulk_triangulation_read_equals_the_node_by_node_read(name, monkeypatch)
         assert got is not None
         for a, b in zip(got, want, strict=True):
             assert (a is None and b is None) or np.array_equal(a, b)
+
+
+def test_a_close_call_is_measured_again_on_a_finer_grid_instead_of_re_meshed(reference_solids, monkeypatch):
+    """OCCT meshes the torus R20 r5 at 0.001 mm to 0.9955× the tolerance on the order-6 grid: within it, but inside
+    the band where that grid could miss the true maximum. The band's triangles are measured on the order-24 grid,
+    which keeps the doubt under FINE_MARGIN, so OCCT's mesh is kept (its triangle count, no fallback); a face whose
+    finer measure leaves the doubt is re-meshed."""
+    from amprep.geometry import mesher
+    from amprep.geometry.tessellate import run_brepmesh
+
+    model = model_from_shape(reference_solids["torus"])
+    res = mesh_model(model, MeshParams(tolerance=0.001))
+    run_brepmesh(model.shape, 0.001, MeshParams(tolerance=0.001))
+    from amprep.geometry.tessellate import bulk_triangulation_arrays
+
+    occt_triangles = sum(len(b[2]) for b in bulk_triangulation_arrays(model.faces) if b is not None)
+    assert res.fallback_faces == {} and res.mesh.n_triangles == occt_triangles
+    assert mesher.TRIGGER_MARGIN < res.max_error / 0.001 <= mesher.FINE_MARGIN
+    monkeypatch.setattr(mesher, "FINE_MARGIN", 0.99)  # the finer measure no longer clears the doubt: re-meshed
+    strict = mesh_model(model, MeshParams(tolerance=0.001))
+    assert strict.fallback_faces == {0: "tolerance"} and strict.max_error <= 0.001 * mesher.FINE_MARGIN
