@@ -55,7 +55,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from .geometry.tessellate import MeshParams
 
     params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular,
-                        min_size=args.min_size, algorithm=args.algorithm)
+                        min_size=args.min_size, algorithm=args.algorithm,
+                        coarsen_circles=not args.keep_occt_circles)
     update, close = _progress_bar(args.quiet)
     try:
         result = convert(args.input, params, update)
@@ -267,6 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--angular", type=float, default=0.5, help="angular deflection in radians (default 0.5)")
     c.add_argument("--min-size", type=float, default=0.0, help="smallest triangle edge in mm (default: tolerance/10)")
     c.add_argument("--algorithm", choices=["delabella", "watson"], default="delabella", help="OCCT mesh algorithm")
+    c.add_argument("--keep-occt-circles", action="store_true",
+                   help="keep OCCT's discretisation of circles it over-refines (more triangles)")
     c.add_argument("--ascii", action="store_true", help="ASCII STL instead of binary")
     c.add_argument("--report", help="write a JSON summary here")
     c.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")

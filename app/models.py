@@ -26,6 +26,9 @@ class _MeshingParams(_Params):
     angular: float = Field(0.5, gt=0, le=3.14, description="Angular deflection, radians")
     min_size: float = Field(0.0, ge=0, description="Smallest triangle edge, mm (0: tolerance/10)")
     algorithm: Literal["delabella", "watson"] = Field("delabella", description="OCCT mesh algorithm")
+    coarsen_circles: bool = Field(True, description="Re-discretise circles OCCT over-refines where only planes, "
+                                  "cylinders and cones meet them (fewer triangles, same tolerance); false keeps "
+                                  "OCCT's edge discretisation")
 
 
 class ConvertParams(_MeshingParams):

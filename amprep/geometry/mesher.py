@@ -6,7 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from OCP.Bnd import Bnd_Box
+from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepBndLib import BRepBndLib
+from OCP.GeomAbs import GeomAbs_Circle
+from OCP.TopoDS import TopoDS
 
 from .cad import CadModel
 from .checks import DEGENERATE_REL_AREA
@@ -37,6 +40,10 @@ TRIGGER_MARGIN = 0.995
 #: a face sampled within (TRIGGER_MARGIN, 1] × tolerance is measured again on the order-24 grid (it contains the
 #: order-6 points; its miss is ~(6/24)² × 0.5 % = 0.03 %) and kept when that stays ≤ FINE_MARGIN × tolerance
 FINE_ORDER = 24
+#: circles are re-discretised at this × tolerance (the re-meshed faces then aim at ENFORCE_MARGIN) when OCCT used
+#: more than COARSEN_EXCESS × the segments that needs (it meshes a cylinder r=10 at 0.49× the tolerance)
+COARSEN_TARGET = 0.95
+COARSEN_EXCESS = 1.1
 FINE_MARGIN = 0.999
 
 
@@ -57,10 +64,14 @@ class MeshResult:
         return float(e.max()) if len(e) else float("nan")
 
 
-def bbox_diagonal(model: CadModel) -> float:
-    """Diagonal of the model's optimal bounding box (mm)."""
+def bbox_diagonal(model: CadModel, meshed: bool = False) -> float:
+    """Diagonal of the model's bounding box (mm): the optimal (exact-geometry) box, or with `meshed` the box of
+    its triangulations (milliseconds where the optimal box of a free-form part takes seconds)."""
     box = Bnd_Box()
-    BRepBndLib.AddOptimal_s(model.shape, box, False, False)
+    if meshed:
+        BRepBndLib.Add_s(model.shape, box, True)
+    else:
+        BRepBndLib.AddOptimal_s(model.shape, box, False, False)
     if box.IsVoid():
         return 0.0
     x0, y0, z0, x1, y1, z1 = box.Get()
@@ -99,12 +110,10 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     prog("meshing", 0.4)
     topo = Topology.of(model.shape)
     n_faces = len(model.faces)
-    min_area = DEGENERATE_REL_AREA * bbox_diagonal(model) ** 2  # what checks.degenerate_mask calls degenerate
+    min_area = DEGENERATE_REL_AREA * bbox_diagonal(model, meshed=True) ** 2  # as checks.degenerate_mask has it
     patches: list[FacePatch | None] = []
     fallback: dict[int, str] = {}
     bulk = bulk_triangulation_arrays(model.faces) if not params.force_fallback else [None] * n_faces
-    if sum(len(b[2]) for b in bulk if b is not None) * len(barycentric_grid(params.sample_order)) >= COMPILED_MIN_POINTS:
-        load_kernels()  # every face's error will be measured: a large part pays numba's start-up once
     for i, face in enumerate(model.faces):
         prog("meshing", 0.4 + 0.1 * i / max(n_faces, 1))
         p = None if params.force_fallback else extract_patch(i, face, topo, bulk[i])
@@ -121,6 +130,22 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     surfaces: list[Surface | None] = [
         None if (p is not None and p.meshed_by == "stored") else surface_of(f) for p, f in zip(patches, model.faces, strict=False)
     ]
+    # every face's error will be measured: a large part pays numba's start-up once (B-splines sooner: numpy
+    # evaluates them ~5× slower than closed forms)
+    points = len(barycentric_grid(params.sample_order))
+    tri_count = [len(b[2]) if b is not None else 0 for b in bulk]
+    free_form = sum(n for n, sf in zip(tri_count, surfaces, strict=True) if sf is not None and sf.data is not None
+                    and sf.surface_type in ("bspline", "bezier"))
+    if sum(tri_count) * points >= COMPILED_MIN_POINTS or free_form * points >= COMPILED_MIN_POINTS / 3:
+        load_kernels()
+    coarsened: set[int] = set()
+    occt_params: dict[int, np.ndarray] = {}
+    occt_patches = list(patches)
+    if params.coarsen_circles and not params.force_fallback:
+        occt_params = coarsen_circle_edges(model, topo, patches, surfaces, tol * COARSEN_TARGET, params.angular)
+        coarsened = set().union(*(_faces_of_edge(model, topo, e) for e in occt_params))
+        for i in coarsened:
+            fallback.setdefault(i, "coarsened")
     # edges of faces that keep OCCT's mesh keep OCCT's discretisation; re-mesh the rest from it
     todo = set(fallback)
     errors: list[np.ndarray] = [np.zeros(0)] * n_faces
@@ -134,7 +159,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                 continue
             old = patches[i]
             seeds = None
-            if old is not None and old.uv is not None:
+            if old is not None and old.uv is not None and i not in coarsened:
                 seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
             try:
                 patches[i] = mesh_face(i, model.faces[i], topo, surf, tol * ENFORCE_MARGIN, params.angular,
@@ -142,6 +167,10 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
             except AmprepError:
                 patches[i] = None
                 unmeshed.append(i)
+        if round_ == 0 and occt_params:
+            back = _revert_coarsening_that_grew(model, topo, patches, occt_patches, occt_params, fallback)
+            coarsened -= back
+            unmeshed = [i for i in unmeshed if i not in back]
         for i in range(n_faces):
             stage("measuring chordal error", 0.5 + 0.5 * i / n_faces)
             if patches[i] is not None and (round_ == 0 or i in todo):
@@ -178,6 +207,70 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, fallback, tuple(sorted(set(unmeshed))))
+
+
+def coarsen_circle_edges(model: CadModel, topo: Topology, patches: list[FacePatch | None],
+                         surfaces: list[Surface | None], target: float, angular: float) -> dict[int, np.ndarray]:
+    """Re-discretise every circular B-rep edge that OCCT split into more than COARSEN_EXCESS × the segments its
+    sagitta needs, r(1 − cos(Δ/2)) ≤ target with Δ ≤ angular, uniformly, where every face on it is a plane or a
+    cylinder meshed by OCCT (their error is the boundary circles' sagitta, so fewer segments keep the tolerance; a
+    cone's apex makes CDT fans that need more points than OCCT's rings); returns {edge: OCCT's parameters}."""
+    out: dict[int, np.ndarray] = {}
+    for ei, par in list(topo.edge_params.items()):
+        if len(par) < 4:
+            continue
+        edge = TopoDS.Edge_s(topo.edges.FindKey(ei + 1))
+        curve = BRepAdaptor_Curve(edge)
+        if curve.GetType() != GeomAbs_Circle:
+            continue
+        faces = _faces_of_edge(model, topo, ei)
+        if not faces or any(patches[f] is None or patches[f].meshed_by != "occt" or surfaces[f] is None  # type: ignore[union-attr]
+                            or surfaces[f].surface_type not in ("plane", "cylinder") for f in faces):  # type: ignore[union-attr]
+            continue
+        r = curve.Circle().Radius()
+        step = min(angular, 2 * np.arccos(1 - target / r)) if target < r else angular
+        n = max(int(np.ceil((par[-1] - par[0]) / step - 1e-9)), 2)
+        if len(par) - 1 > COARSEN_EXCESS * n:
+            out[ei] = par
+            topo.edge_params[ei] = np.linspace(par[0], par[-1], n + 1)
+    return out
+
+
+def _revert_coarsening_that_grew(model: CadModel, topo: Topology, patches: list[FacePatch | None],
+                                 occt_patches: list[FacePatch | None], occt_params: dict[int, np.ndarray],
+                                 fallback: dict[int, str]) -> set[int]:
+    """Faces joined through re-discretised circles form groups; a group whose re-mesh has more triangles than
+    OCCT's (a cylinder whose (u,v) strips do not line up needs insertions) or failed gets OCCT's edges and meshes
+    back. Returns the faces reverted."""
+    parent = {f: f for e in occt_params for f in _faces_of_edge(model, topo, e)}
+
+    def root(f: int) -> int:
+        while parent[f] != f:
+            f = parent[f]
+        return f
+
+    for e in occt_params:
+        faces = sorted(_faces_of_edge(model, topo, e))
+        for f in faces[1:]:
+            parent[root(f)] = root(faces[0])
+    groups: dict[int, list[int]] = {}
+    for f in parent:
+        groups.setdefault(root(f), []).append(f)
+    reverted: set[int] = set()
+    for faces in groups.values():
+        new = [patches[f] for f in faces]
+        if all(p is not None for p in new) and sum(len(p.tris) for p in new) < sum(  # type: ignore[union-attr]
+                len(occt_patches[f].tris) for f in faces):  # type: ignore[union-attr]
+            continue
+        for f in faces:
+            patches[f] = occt_patches[f]
+            if fallback.get(f) == "coarsened":
+                del fallback[f]
+        reverted |= set(faces)
+    for e, par in occt_params.items():
+        if _faces_of_edge(model, topo, e) & reverted:
+            topo.edge_params[e] = par
+    return reverted
 
 
 def _within_on_a_finer_grid(patch: FacePatch | None, surface: Surface | None, error: np.ndarray, tol: float) -> bool:

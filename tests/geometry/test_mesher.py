@@ -206,3 +206,54 @@ def test_a_close_call_is_measured_again_on_a_finer_grid_instead_of_re_meshed(ref
     monkeypatch.setattr(mesher, "FINE_MARGIN", 0.99)  # the finer measure no longer clears the doubt: re-meshed
     strict = mesh_model(model, MeshParams(tolerance=0.001))
     assert strict.fallback_faces == {0: "tolerance"} and strict.max_error <= 0.001 * mesher.FINE_MARGIN
+
+
+@pytest.mark.parametrize("tol", [0.1, 0.01, 0.001])
+def test_circles_occt_over_refines_are_re_discretised_with_fewer_triangles(reference_solids, tol):
+    """OCCT meshes a cylinder r=10 at 0.49× the tolerance (about 1.4× the segments needed); its circles are
+    re-discretised uniformly at the sagitta the tolerance allows and the three faces re-meshed: fewer triangles,
+    still closed and within the tolerance, and OCCT's mesh is what comes out with coarsen_circles off."""
+    model = model_from_shape(reference_solids["cylinder"])
+    occt = mesh_model(model, MeshParams(tolerance=tol, coarsen_circles=False))
+    res = mesh_model(model, MeshParams(tolerance=tol))
+    assert occt.fallback_faces == {} and occt.max_error < 0.6 * tol
+    assert set(res.fallback_faces.values()) == {"coarsened"}
+    assert res.mesh.n_triangles <= 0.8 * occt.mesh.n_triangles
+    c = check_mesh(res.mesh)
+    assert c.closed and c.degenerate_triangles == 0 and manifold3d_accepts(res.mesh)
+    assert 0.6 * tol < res.max_error <= tol
+    r = 10.0
+    n = int(np.ceil(2 * np.pi / min(0.5, 2 * np.arccos(1 - 0.95 * tol / r))))
+    on_circle = res.mesh.vertex_dim == 1
+    assert on_circle.sum() == 2 * (n - 1)  # two circles of n segments; their closing vertex is a B-rep vertex
+
+
+def test_circles_next_to_other_surfaces_keep_occts_discretisation(reference_solids):
+    """The filleted block's circular arcs join cylinders (fillets) to spheres (corners), whose error is not the
+    circle's sagitta: every B-rep edge keeps OCCT's discretisation and no face is re-meshed for coarsening."""
+    model = model_from_shape(reference_solids["filleted_block"])
+    res = mesh_model(model, MeshParams(tolerance=0.1))
+    occt = mesh_model(model, MeshParams(tolerance=0.1, coarsen_circles=False))
+    assert "coarsened" not in res.fallback_faces.values()
+
+    def per_edge(mesh):
+        on = mesh.vertex_dim == 1
+        return np.bincount(mesh.vertex_entity[on], minlength=200)
+
+    assert np.array_equal(per_edge(res.mesh), per_edge(occt.mesh)) and res.mesh.n_triangles == occt.mesh.n_triangles
+
+
+def test_a_coarsening_that_would_add_triangles_is_reverted():
+    """On NIST CTC-02 at 0.01 mm two cylinder faces (44, 48) re-meshed from coarsened circles would need ~7,100
+    triangles each against OCCT's 478 (their (u,v) strips do not line up): their groups get OCCT's edges and meshes
+    back, the others keep the gain, so the part never has more triangles than with OCCT's circles."""
+    model = read_cad(corpus("nist_ctc02_ap242.stp"))
+    occt = mesh_model(model, MeshParams(tolerance=0.01, coarsen_circles=False))
+    res = mesh_model(model, MeshParams(tolerance=0.01))
+    n_occt = np.bincount(occt.mesh.face_ids, minlength=len(model.faces))
+    n_res = np.bincount(res.mesh.face_ids, minlength=len(model.faces))
+    assert n_res[44] == n_occt[44] and n_res[48] == n_occt[48]
+    assert 44 not in res.fallback_faces and 48 not in res.fallback_faces
+    assert "coarsened" in res.fallback_faces.values() and res.mesh.n_triangles < occt.mesh.n_triangles
+    c = check_mesh(res.mesh)
+    assert c.closed and c.degenerate_triangles == 0 and res.max_error <= 0.01

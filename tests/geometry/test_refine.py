@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -193,7 +194,7 @@ def test_refine_cli_summary_on_an_ascii_terminal(tmp_path):
                         str(tmp_path / "r.stl"), "--method", "vta", "--iterations", "2", "--no-compare"],
                        capture_output=True, timeout=300, env=os.environ | {"PYTHONIOENCODING": "ascii"})
     assert r.returncode == 0, r.stderr
-    assert b"refined by VTA" in r.stdout and b"52 ? 468 triangles" in r.stdout
+    assert b"refined by VTA" in r.stdout and re.search(rb"\d+ \? \d+ triangles", r.stdout)
 
 
 def test_a_refinement_over_the_triangle_limit_is_refused_before_it_runs(tmp_path, reference_solids):
