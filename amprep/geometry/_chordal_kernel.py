@@ -44,6 +44,20 @@ def _unit_normal(c):
     return nx / n, ny / n, nz / n, True
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _sample(w, uv, m, p):
+    """(u, v) of grid point p of triangle m: Σ_k w[p,k] uv[m,k]."""
+    u = w[p, 0] * uv[m, 0, 0] + w[p, 1] * uv[m, 1, 0] + w[p, 2] * uv[m, 2, 0]
+    v = w[p, 0] * uv[m, 0, 1] + w[p, 1] * uv[m, 1, 1] + w[p, 2] * uv[m, 2, 1]
+    return u, v
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _distance(c, nx, ny, nz, xyz):
+    """|(xyz − c[0]) · n̂|."""
+    return abs((xyz[0] - c[0, 0]) * nx + (xyz[1] - c[0, 1]) * ny + (xyz[2] - c[0, 2]) * nz)
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def analytic_chordal_kernel(kind, prm, corners, uv, w, out):
     """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m|; corners (M,3,3), uv (M,3,2), w (P,3)."""
@@ -53,12 +67,8 @@ def analytic_chordal_kernel(kind, prm, corners, uv, w, out):
         best = 0.0
         if ok:
             for p in range(w.shape[0]):
-                u = w[p, 0] * uv[m, 0, 0] + w[p, 1] * uv[m, 1, 0] + w[p, 2] * uv[m, 2, 0]
-                v = w[p, 0] * uv[m, 0, 1] + w[p, 1] * uv[m, 1, 1] + w[p, 2] * uv[m, 2, 1]
-                x, y, z = _analytic(kind, prm, u, v)
-                d = abs((x - c[0, 0]) * nx + (y - c[0, 1]) * ny + (z - c[0, 2]) * nz)
-                if d > best:
-                    best = d
+                u, v = _sample(w, uv, m, p)
+                best = max(best, _distance(c, nx, ny, nz, _analytic(kind, prm, u, v)))
         out[m] = best
 
 
@@ -78,14 +88,11 @@ def bspline_chordal_kernel(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, 
             best = 0.0
             if ok:
                 for p in range(w.shape[0]):
-                    u = w[p, 0] * uv[m, 0, 0] + w[p, 1] * uv[m, 1, 0] + w[p, 2] * uv[m, 2, 0]
-                    v = w[p, 0] * uv[m, 0, 1] + w[p, 1] * uv[m, 1, 1] + w[p, 2] * uv[m, 2, 1]
+                    u, v = _sample(w, uv, m, p)
                     if uper[1] > uper[0]:
                         u = uper[0] + (u - uper[0]) % (uper[1] - uper[0])
                     if vper[1] > vper[0]:
                         v = vper[0] + (v - vper[0]) % (vper[1] - vper[0])
-                    x, y, z = point_kernel(pw, uknots, vknots, udeg, vdeg, u, v, bu, bv, left, right)
-                    d = abs((x - c[0, 0]) * nx + (y - c[0, 1]) * ny + (z - c[0, 2]) * nz)
-                    if d > best:
-                        best = d
+                    xyz = point_kernel(pw, uknots, vknots, udeg, vdeg, u, v, bu, bv, left, right)
+                    best = max(best, _distance(c, nx, ny, nz, xyz))
             out[m] = best
