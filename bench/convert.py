@@ -208,6 +208,7 @@ def main() -> None:
     ap.add_argument("--tools", default=",".join(TOOLS))
     ap.add_argument("--only", default="", help="comma-separated substrings of part names")
     ap.add_argument("--name", default="bench_convert", help="docs/NAME.md and docs/NAME.csv")
+    ap.add_argument("--tolerances", default="", help="comma-separated mm, instead of 0.1, 0.01 (and 0.001 on small parts)")
     args = ap.parse_args()
     if args.child:
         tool, path, tol, out = args.child
@@ -222,6 +223,8 @@ def main() -> None:
     for part in parts:
         diag = _diag(part)
         tols = [0.1, 0.01] + ([0.001] if (diag <= SMALL_DIAG or part.parent == tmp) and not args.quick else [])
+        if args.tolerances:
+            tols = [float(t) for t in args.tolerances.split(",")]
         if args.quick and diag > SMALL_DIAG * 4:
             continue
         for tol in tols:
