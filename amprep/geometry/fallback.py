@@ -11,6 +11,7 @@ from OCP.BRepTools import BRepTools_WireExplorer
 from OCP.GCPnts import GCPnts_TangentialDeflection
 from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
+from scipy.spatial import cKDTree
 
 from .chordal import triangle_chordal_error
 from .errors import AmprepError, ErrorCode
@@ -18,6 +19,8 @@ from .surfaces import Surface
 from .tessellate import FacePatch, Topology, explore
 
 MAX_ROUNDS = 40
+#: points are inserted no closer than this × tolerance (in metric-scaled (u,v) ≈ mm) to another
+MIN_SPACING = 0.01
 
 
 def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
@@ -154,7 +157,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     if seeds is not None and len(seeds):
         # no inside test needed: a seed outside the boundary polygon lies in a hole or concavity that Triangle
         # eats, so it is left unused
-        pts = np.concatenate([pts, np.unique(seeds * scale, axis=0)])
+        pts = np.concatenate([pts, _apart(np.unique(seeds * scale, axis=0), pts, MIN_SPACING * tolerance)])
     tris = _cdt(pts, segments, holes)
     affine = surface.affine
     xyz = surface.evaluate(pts / scale)
@@ -181,7 +184,9 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
             final_err = err
             break
         seg_code = np.sort(segments.min(axis=1) * (len(pts) + 1) + segments.max(axis=1))
-        new = _insertion_points(pts, tris[bad], seg_code, len(pts) + 1)
+        new = _apart(_insertion_points(pts, tris[bad], seg_code, len(pts) + 1), pts, MIN_SPACING * tolerance)
+        if not len(new):
+            break
         pts = np.concatenate([pts, new])
         tris = _cdt(pts, segments, holes)
     uv = pts / scale
@@ -212,6 +217,24 @@ def _triangle_codes(tris: np.ndarray, n_points: int) -> np.ndarray | None:
         return None
     s = np.sort(tris, axis=1).astype(np.int64)
     return (s[:, 0] * _CODE_BASE + s[:, 1]) * _CODE_BASE + s[:, 2]
+
+
+def _apart(new: np.ndarray, pts: np.ndarray, eps: float) -> np.ndarray:
+    """The new (k, 2) points farther than eps from every existing point and from each other (the first kept): two
+    nodes closer than that gain nothing and may round to one vertex in a float32 STL (a degenerate triangle)."""
+    if not len(new):
+        return new
+    far = cKDTree(pts).query(new, distance_upper_bound=eps)[0] > eps
+    new = new[far]
+    if len(new) > 1:
+        pairs = cKDTree(new).query_pairs(eps, output_type="ndarray")
+        if len(pairs):
+            drop = np.zeros(len(new), bool)
+            for i, j in pairs[np.argsort(pairs[:, 1])]:  # keep the lower index of each close pair
+                if not drop[i]:
+                    drop[j] = True
+            new = new[~drop]
+    return new
 
 
 def _insertion_points(pts: np.ndarray, bad: np.ndarray, seg_code: np.ndarray, base: int) -> np.ndarray:
