@@ -79,6 +79,19 @@ def degenerate_mask(mesh: Mesh, rel_eps: float = DEGENERATE_REL_AREA) -> np.ndar
     return repeated | (triangle_areas(mesh.corners) <= rel_eps * scale * scale)
 
 
+def float32_degenerate_count(mesh: Mesh) -> int:
+    """Triangles that are not degenerate but become so once their corners are rounded to float32 (what STL and
+    3MF store): the triangle count a reader of the file will call degenerate beyond the in-memory check."""
+    if mesh.n_triangles == 0:
+        return 0
+    lo, hi = mesh.bbox()
+    scale = float(np.linalg.norm(hi - lo)) or 1.0
+    before = degenerate_mask(mesh)
+    corners = mesh.vertices.astype(np.float32).astype(np.float64)[mesh.triangles]
+    after = triangle_areas(corners) <= DEGENERATE_REL_AREA * scale * scale
+    return int((after & ~before).sum())
+
+
 def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.ndarray]:
     """(number of shells, (m,) label per triangle): triangles joined through shared edges (`inc`: the mesh's edge
     table when already made)."""

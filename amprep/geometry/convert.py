@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from .cad import CadModel, read_cad
-from .checks import MeshChecks, check_mesh, manifold3d_accepts
+from .checks import MeshChecks, check_mesh, float32_degenerate_count, manifold3d_accepts
 from .errors import AmprepError, ErrorCode
 from .formats import CAD_FORMATS, sniff_path
 from .io_3mf import write_3mf
@@ -61,6 +61,7 @@ class ConvertResult:
     meshing: MeshResult | None
     provenance: dict[str, Any]
     notes: list[str] = field(default_factory=list)
+    float32_degenerate: int = 0  # triangles degenerate only after rounding to the file's float32 coordinates
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of the conversion (the `convert` part of a job's report)."""
@@ -73,6 +74,7 @@ class ConvertResult:
                 "nonmanifold_edges": c.nonmanifold_edges, "misoriented_edges": c.misoriented_edges,
                 "degenerate_triangles": c.degenerate_triangles, "duplicate_triangles": c.duplicate_triangles,
                 "shells": c.shells, "volume": c.volume, "area": c.area,
+                "float32_degenerate_triangles": self.float32_degenerate,
             },
             "provenance": self.provenance,
             "notes": self.notes,
@@ -125,9 +127,13 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the model produced no triangles")
     checks = check_mesh(mesh)
     ok3d = manifold3d_accepts(mesh)
+    rounded = float32_degenerate_count(mesh)
+    if rounded:
+        notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
+                     "store (a part far from the origin at a micron tolerance)")
     if not checks.closed:
         notes.append(f"the mesh is open: {checks.boundary_edges} boundary and {checks.nonmanifold_edges} non-manifold edges")
-    return ConvertResult(mesh, info, checks, ok3d, meshing, provenance(params if meshing else None), notes)
+    return ConvertResult(mesh, info, checks, ok3d, meshing, provenance(params if meshing else None), notes, rounded)
 
 
 def header_text(result: ConvertResult) -> str:

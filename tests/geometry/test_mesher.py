@@ -285,3 +285,18 @@ def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     corners = patch.nodes[patch.tris[inner[patch.tris].all(axis=1)]].astype(np.float32).astype(np.float64)
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     assert area.min() > 1e-7
+
+
+def test_triangles_that_float32_rounding_makes_degenerate_are_counted_and_said():
+    """A sliver 1.4e-5 mm high at 300–400 mm from the origin: not degenerate in float64, flat once its corners are
+    rounded to float32 as STL stores them (the spacing of float32 there is 3e-5 mm); the same sliver near the origin
+    survives the rounding."""
+    from amprep.geometry.checks import degenerate_mask, float32_degenerate_count
+    from amprep.geometry.mesh import Mesh
+
+    base = np.array([400.0, 300.0, 100.0])
+    verts = base + np.array([[0, 0, 0], [0.25, 0, 0], [0.125, 1.4e-5, 0], [0, 5.0, 5.0]])
+    sliver = Mesh.from_arrays(verts, np.array([[0, 1, 2], [0, 1, 3]]))
+    assert not degenerate_mask(sliver).any()
+    assert float32_degenerate_count(sliver) == 1
+    assert float32_degenerate_count(Mesh.from_arrays(verts - base, sliver.triangles)) == 0
