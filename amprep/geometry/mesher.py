@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,8 @@ FINE_ORDER = 24
 #: more than COARSEN_EXCESS × the segments that needs (it meshes a cylinder r=10 at 0.49× the tolerance)
 COARSEN_TARGET = 0.95
 COARSEN_EXCESS = 1.1
+#: and only for a group of faces where that saves at least this fraction of their triangles (re-meshing costs time)
+COARSEN_MIN_GAIN = 0.2
 FINE_MARGIN = 0.999
 
 
@@ -143,6 +146,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     occt_patches = list(patches)
     if params.coarsen_circles and not params.force_fallback:
         occt_params = coarsen_circle_edges(model, topo, patches, surfaces, tol * COARSEN_TARGET, params.angular)
+        occt_params = _keep_coarsening_that_pays(model, topo, patches, occt_params)
         coarsened = set().union(*(_faces_of_edge(model, topo, e) for e in occt_params))
         for i in coarsened:
             fallback.setdefault(i, "coarsened")
@@ -236,28 +240,52 @@ def coarsen_circle_edges(model: CadModel, topo: Topology, patches: list[FacePatc
     return out
 
 
-def _revert_coarsening_that_grew(model: CadModel, topo: Topology, patches: list[FacePatch | None],
-                                 occt_patches: list[FacePatch | None], occt_params: dict[int, np.ndarray],
-                                 fallback: dict[int, str]) -> set[int]:
-    """Faces joined through re-discretised circles form groups; a group whose re-mesh has more triangles than
-    OCCT's (a cylinder whose (u,v) strips do not line up needs insertions) or failed gets OCCT's edges and meshes
-    back. Returns the faces reverted."""
-    parent = {f: f for e in occt_params for f in _faces_of_edge(model, topo, e)}
+def _edge_groups(model: CadModel, topo: Topology, edges: Iterable[int]) -> list[tuple[list[int], list[int]]]:
+    """(faces, edges) of each connected group of faces joined through the given B-rep edges."""
+    edges = list(edges)
+    parent = {f: f for e in edges for f in _faces_of_edge(model, topo, e)}
 
     def root(f: int) -> int:
         while parent[f] != f:
             f = parent[f]
         return f
 
-    for e in occt_params:
+    for e in edges:
         faces = sorted(_faces_of_edge(model, topo, e))
         for f in faces[1:]:
             parent[root(f)] = root(faces[0])
-    groups: dict[int, list[int]] = {}
+    groups: dict[int, tuple[list[int], list[int]]] = {}
     for f in parent:
-        groups.setdefault(root(f), []).append(f)
+        groups.setdefault(root(f), ([], []))[0].append(f)
+    for e in edges:
+        groups[root(min(_faces_of_edge(model, topo, e)))][1].append(e)
+    return list(groups.values())
+
+
+def _keep_coarsening_that_pays(model: CadModel, topo: Topology, patches: list[FacePatch | None],
+                               occt_params: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """Drop the re-discretisation of a group of faces whose estimated saving (the segments removed, once per face on
+    each edge) is under COARSEN_MIN_GAIN of its OCCT triangles: re-meshing it would cost more than it gives."""
+    kept: dict[int, np.ndarray] = {}
+    for faces, edges in _edge_groups(model, topo, occt_params):
+        saved = sum((len(occt_params[e]) - len(topo.edge_params[e])) * len(_faces_of_edge(model, topo, e))
+                    for e in edges)
+        if saved >= COARSEN_MIN_GAIN * sum(len(patches[f].tris) for f in faces):  # type: ignore[union-attr]
+            kept.update((e, occt_params[e]) for e in edges)
+        else:
+            for e in edges:
+                topo.edge_params[e] = occt_params[e]
+    return kept
+
+
+def _revert_coarsening_that_grew(model: CadModel, topo: Topology, patches: list[FacePatch | None],
+                                 occt_patches: list[FacePatch | None], occt_params: dict[int, np.ndarray],
+                                 fallback: dict[int, str]) -> set[int]:
+    """Faces joined through re-discretised circles form groups; a group whose re-mesh has more triangles than
+    OCCT's (a cylinder whose (u,v) strips do not line up needs insertions) or failed gets OCCT's edges and meshes
+    back. Returns the faces reverted."""
     reverted: set[int] = set()
-    for faces in groups.values():
+    for faces, _ in _edge_groups(model, topo, occt_params):
         new = [patches[f] for f in faces]
         if all(p is not None for p in new) and sum(len(p.tris) for p in new) < sum(  # type: ignore[union-attr]
                 len(occt_patches[f].tris) for f in faces):  # type: ignore[union-attr]
