@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import json
 from collections.abc import AsyncIterator
 
 import redis.asyncio as aioredis
@@ -30,7 +29,9 @@ async def job_updates(aredis: aioredis.Redis, store: JobStore, job_id: str, time
                     return
                 msg = await pubsub.get_message(ignore_subscribe_messages=True, timeout=min(wait, 15.0))
                 if msg is not None:
-                    job = Job(**json.loads(msg["data"]))
+                    # the message says something changed; read the job itself: messages published between our
+                    # subscribe and first read arrive after it, older than what was already yielded
+                    job = store.get(job_id)
                     break
                 if deadline is None:
                     job = store.get(job_id)  # idle: re-read (and let the caller send a keep-alive)
