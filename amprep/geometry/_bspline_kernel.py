@@ -56,15 +56,20 @@ def point_kernel(pw, uknots, vknots, udeg, vdeg, u, v, bu, bv, left, right):
     return x / w, y / w, z / w
 
 
+@njit(cache=True, nogil=True)
+def scratch(udeg, vdeg):
+    """(bu, bv, left, right): the work arrays point_kernel needs, one set per thread."""
+    deg = max(udeg, vdeg) + 1
+    return np.empty(udeg + 1), np.empty(vdeg + 1), np.empty(deg), np.empty(deg)
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def eval_surface_kernel(pw, uknots, vknots, udeg, vdeg, uv, out):
     """out (N, 3) ← S(uv (N, 2)), in blocks over the threads."""
     n = uv.shape[0]
     block = 4096
-    deg = max(udeg, vdeg) + 1
     for blk in prange((n + block - 1) // block):
-        bu, bv = np.empty(udeg + 1), np.empty(vdeg + 1)
-        left, right = np.empty(deg), np.empty(deg)
+        bu, bv, left, right = scratch(udeg, vdeg)
         for k in range(blk * block, min(n, (blk + 1) * block)):
             x, y, z = point_kernel(pw, uknots, vknots, udeg, vdeg, uv[k, 0], uv[k, 1], bu, bv, left, right)
             out[k, 0] = x

@@ -4,7 +4,7 @@ taken in one pass, with no (m, k, 3) intermediate; imported only when a large ev
 import numpy as np
 from numba import njit, prange
 
-from ._bspline_kernel import point_kernel
+from ._bspline_kernel import point_kernel, scratch
 
 PLANE, CYLINDER, CONE, SPHERE, TORUS = 0, 1, 2, 3, 4
 
@@ -78,10 +78,8 @@ def bspline_chordal_kernel(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, 
     wrapped into [uper[0], uper[1]) (uper[1] ≤ uper[0]: not periodic)."""
     n = corners.shape[0]
     block = 1024
-    deg = max(udeg, vdeg) + 1
     for blk in prange((n + block - 1) // block):
-        bu, bv = np.empty(udeg + 1), np.empty(vdeg + 1)
-        left, right = np.empty(deg), np.empty(deg)
+        bu, bv, left, right = scratch(udeg, vdeg)
         for m in range(blk * block, min(n, (blk + 1) * block)):
             c = corners[m]
             nx, ny, nz, ok = _unit_normal(c)

@@ -84,12 +84,8 @@ def float32_degenerate_count(mesh: Mesh) -> int:
     3MF store): the triangle count a reader of the file will call degenerate beyond the in-memory check."""
     if mesh.n_triangles == 0:
         return 0
-    lo, hi = mesh.bbox()
-    scale = float(np.linalg.norm(hi - lo)) or 1.0
-    before = degenerate_mask(mesh)
-    corners = mesh.vertices.astype(np.float32).astype(np.float64)[mesh.triangles]
-    after = triangle_areas(corners) <= DEGENERATE_REL_AREA * scale * scale
-    return int((after & ~before).sum())
+    rounded = mesh.with_arrays(vertices=mesh.vertices.astype(np.float32).astype(np.float64))
+    return int((degenerate_mask(rounded) & ~degenerate_mask(mesh)).sum())
 
 
 def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.ndarray]:

@@ -41,13 +41,13 @@ TRIGGER_MARGIN = 0.995
 #: a face sampled within (TRIGGER_MARGIN, 1] × tolerance is measured again on the order-24 grid (it contains the
 #: order-6 points; its miss is ~(6/24)² × 0.5 % = 0.03 %) and kept when that stays ≤ FINE_MARGIN × tolerance
 FINE_ORDER = 24
+FINE_MARGIN = 0.999
 #: circles are re-discretised at this × tolerance (the re-meshed faces then aim at ENFORCE_MARGIN) when OCCT used
 #: more than COARSEN_EXCESS × the segments that needs (it meshes a cylinder r=10 at 0.49× the tolerance)
 COARSEN_TARGET = 0.95
 COARSEN_EXCESS = 1.1
 #: and only for a group of faces where that saves at least this fraction of their triangles (re-meshing costs time)
 COARSEN_MIN_GAIN = 0.2
-FINE_MARGIN = 0.999
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,6 +23,7 @@ from OCP.GeomConvert import GeomConvert
 from OCP.TopoDS import TopoDS_Face
 
 from .bspline import eval_surface
+from .occt_arrays import array1, vec
 from .swept import curve_of, extrusion, revolution
 
 SURFACE_TYPES = {
@@ -33,12 +34,8 @@ SURFACE_TYPES = {
 }
 
 
-def _vec(p) -> np.ndarray:  # type: ignore[no-untyped-def]
-    return np.array([p.X(), p.Y(), p.Z()])
-
-
 def _frame(ax3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
-    return _vec(ax3.Location()), _vec(ax3.XDirection()), _vec(ax3.YDirection()), _vec(ax3.Direction())
+    return vec(ax3.Location()), vec(ax3.XDirection()), vec(ax3.YDirection()), vec(ax3.Direction())
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,10 +91,6 @@ def torus(o: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray, big: float
     return f
 
 
-def _array1(arr) -> np.ndarray:  # type: ignore[no-untyped-def]
-    return np.array([arr.Value(i) for i in range(arr.Lower(), arr.Upper() + 1)], dtype=float)
-
-
 def bspline_data(surf) -> dict:  # type: ignore[no-untyped-def]
     """Poles (nu, nv, 3), weights (nu, nv), flat knots and degrees of a Geom_BSplineSurface (made non-periodic);
     `uperiod`/`vperiod` = (first, last) of a periodic direction, into which parameters are wrapped."""
@@ -111,14 +104,14 @@ def bspline_data(surf) -> dict:  # type: ignore[no-untyped-def]
         if surf.IsVPeriodic():
             surf.SetVNotPeriodic()
     nu, nv = surf.NbUPoles(), surf.NbVPoles()
-    poles = np.array([[_vec(surf.Pole(i, j)) for j in range(1, nv + 1)] for i in range(1, nu + 1)])
+    poles = np.array([[vec(surf.Pole(i, j)) for j in range(1, nv + 1)] for i in range(1, nu + 1)])
     if surf.IsURational() or surf.IsVRational():
         weights = np.array([[surf.Weight(i, j) for j in range(1, nv + 1)] for i in range(1, nu + 1)])
     else:  # OCCT keeps no weight array for a polynomial surface (its copy may report 0)
         weights = np.ones((nu, nv))
     return dict(
         poles=poles.reshape(nu, nv, 3), weights=weights.reshape(nu, nv),
-        uknots=_array1(surf.UKnotSequence()), vknots=_array1(surf.VKnotSequence()),
+        uknots=array1(surf.UKnotSequence()), vknots=array1(surf.VKnotSequence()),
         udeg=surf.UDegree(), vdeg=surf.VDegree(), uperiod=uperiod, vperiod=vperiod,
     )
 
@@ -202,9 +195,9 @@ def _swept(ad: BRepAdaptor_Surface, kind) -> Callable[[np.ndarray], np.ndarray] 
         return None
     if kind == GeomAbs_SurfaceOfRevolution:
         ax = ad.AxeOfRevolution()
-        f = revolution(_vec(ax.Location()), _vec(ax.Direction()), curve)
+        f = revolution(vec(ax.Location()), vec(ax.Direction()), curve)
     else:
-        f = extrusion(_vec(ad.Direction()), curve)
+        f = extrusion(vec(ad.Direction()), curve)
     u = np.linspace(ad.FirstUParameter(), ad.LastUParameter(), 5)
     v = np.linspace(ad.FirstVParameter(), ad.LastVParameter(), 5)
     if not (np.isfinite(u).all() and np.isfinite(v).all()):

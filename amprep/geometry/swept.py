@@ -10,16 +10,9 @@ from OCP.GeomAbs import GeomAbs_BezierCurve, GeomAbs_BSplineCurve, GeomAbs_Circl
 from OCP.GeomConvert import GeomConvert
 
 from .bspline import basis_functions, find_span
+from .occt_arrays import array1, vec
 
 Curve = Callable[[np.ndarray], np.ndarray]  # (N,) parameters → (N, 3) points
-
-
-def _vec(p) -> np.ndarray:  # type: ignore[no-untyped-def]
-    return np.array([p.X(), p.Y(), p.Z()])
-
-
-def _array1(arr) -> np.ndarray:  # type: ignore[no-untyped-def]
-    return np.array([arr.Value(i) for i in range(arr.Lower(), arr.Upper() + 1)], dtype=float)
 
 
 def bspline_curve(geom) -> Curve:  # type: ignore[no-untyped-def]
@@ -29,9 +22,9 @@ def bspline_curve(geom) -> Curve:  # type: ignore[no-untyped-def]
         geom = geom.Copy()
         geom.SetNotPeriodic()
     n, deg = geom.NbPoles(), geom.Degree()
-    poles = np.array([_vec(geom.Pole(i)) for i in range(1, n + 1)])
+    poles = np.array([vec(geom.Pole(i)) for i in range(1, n + 1)])
     weights = np.array([geom.Weight(i) for i in range(1, n + 1)]) if geom.IsRational() else np.ones(n)
-    knots = _array1(geom.KnotSequence())
+    knots = array1(geom.KnotSequence())
     pw = np.concatenate([poles * weights[:, None], weights[:, None]], axis=1)  # (n, 4)
 
     def c(t: np.ndarray) -> np.ndarray:
@@ -51,12 +44,12 @@ def curve_of(adaptor) -> Curve | None:  # type: ignore[no-untyped-def]
     kind = adaptor.GetType()
     if kind == GeomAbs_Line:
         lin = adaptor.Line()
-        p, d = _vec(lin.Location()), _vec(lin.Direction())
+        p, d = vec(lin.Location()), vec(lin.Direction())
         return lambda t: p + np.asarray(t, float)[:, None] * d
     if kind in (GeomAbs_Circle, GeomAbs_Ellipse):
         conic = adaptor.Circle() if kind == GeomAbs_Circle else adaptor.Ellipse()
         pos = conic.Position()
-        o, x, y = _vec(pos.Location()), _vec(pos.XDirection()), _vec(pos.YDirection())
+        o, x, y = vec(pos.Location()), vec(pos.XDirection()), vec(pos.YDirection())
         a = conic.Radius() if kind == GeomAbs_Circle else conic.MajorRadius()
         b = conic.Radius() if kind == GeomAbs_Circle else conic.MinorRadius()
         return lambda t: o + a * np.cos(np.asarray(t, float))[:, None] * x + b * np.sin(np.asarray(t, float))[:, None] * y

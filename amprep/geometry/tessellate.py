@@ -44,7 +44,7 @@ class MeshParams:
     enforce_tolerance: bool = True
     force_fallback: bool = False
     sample_order: int = 6
-    coarsen_circles: bool = True  # re-discretise circles OCCT over-refines where only planes, cylinders, cones meet
+    coarsen_circles: bool = True  # re-discretise circles OCCT over-refines where only planes and cylinders meet
 
     def validate(self) -> None:
         """Raise invalid_parameter for values no mesher can honour."""
