@@ -70,22 +70,26 @@ class MeshChecks:
 DEGENERATE_REL_AREA = 1e-12
 
 
-def degenerate_mask(mesh: Mesh, rel_eps: float = DEGENERATE_REL_AREA) -> np.ndarray:
-    """(m,) bool: a repeated corner index, or area ≤ rel_eps · (bbox diagonal)²."""
+def degenerate_mask(mesh: Mesh, rel_eps: float = DEGENERATE_REL_AREA, areas: np.ndarray | None = None) -> np.ndarray:
+    """(m,) bool: a repeated corner index, or area ≤ rel_eps · (bbox diagonal)² (`areas` (m,): the mesh's
+    triangle_areas when already computed)."""
     t = mesh.triangles
     repeated = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
     lo, hi = mesh.bbox()
     scale = float(np.linalg.norm(hi - lo)) or 1.0
-    return repeated | (triangle_areas(mesh.corners) <= rel_eps * scale * scale)
+    areas = triangle_areas(mesh.corners) if areas is None else areas
+    return repeated | (areas <= rel_eps * scale * scale)
 
 
-def float32_degenerate_count(mesh: Mesh) -> int:
+def float32_degenerate_count(mesh: Mesh, degenerate: np.ndarray | None = None) -> int:
     """Triangles that are not degenerate but become so once their corners are rounded to float32 (what STL and
-    3MF store): the triangle count a reader of the file will call degenerate beyond the in-memory check."""
+    3MF store): the triangle count a reader of the file will call degenerate beyond the in-memory check
+    (`degenerate` (m,): the mesh's degenerate_mask when already computed)."""
     if mesh.n_triangles == 0:
         return 0
     rounded = mesh.with_arrays(vertices=mesh.vertices.astype(np.float32).astype(np.float64))
-    return int((degenerate_mask(rounded) & ~degenerate_mask(mesh)).sum())
+    degenerate = degenerate_mask(mesh) if degenerate is None else degenerate
+    return int((degenerate_mask(rounded) & ~degenerate).sum())
 
 
 def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.ndarray]:
@@ -117,8 +121,9 @@ def duplicate_count(triangles: np.ndarray) -> int:
     return int((srt[1:] == srt[:-1]).all(axis=1).sum())
 
 
-def check_mesh(mesh: Mesh) -> MeshChecks:
-    """Edge-incidence checks of a mesh (an edge is identified by its two vertex indices, never by distance)."""
+def check_mesh(mesh: Mesh, degenerate: np.ndarray | None = None) -> MeshChecks:
+    """Edge-incidence checks of a mesh (an edge is identified by its two vertex indices, never by distance);
+    `degenerate` (m,) bool, when given, receives the degenerate_mask."""
     if mesh.n_triangles == 0:
         return MeshChecks(0, mesh.n_vertices, 0, 0, 0, 0, 0, 0, 0.0, 0.0)
     inc = edge_incidence(mesh.triangles)
@@ -126,6 +131,10 @@ def check_mesh(mesh: Mesh) -> MeshChecks:
     nonmanifold = int((inc.count > 2).sum())
     misoriented = int(((inc.count == 2) & (inc.forward != 1)).sum())
     corners = mesh.corners
+    areas = triangle_areas(corners)
+    mask = degenerate_mask(mesh, areas=areas)
+    if degenerate is not None:
+        degenerate[:] = mask
     shells, _ = shell_labels(mesh, inc)
     used = np.zeros(max(mesh.n_vertices, int(mesh.triangles.max()) + 1), bool)
     used[mesh.triangles] = True
@@ -135,11 +144,11 @@ def check_mesh(mesh: Mesh) -> MeshChecks:
         boundary_edges=boundary,
         nonmanifold_edges=nonmanifold,
         misoriented_edges=misoriented,
-        degenerate_triangles=int(degenerate_mask(mesh).sum()),
+        degenerate_triangles=int(mask.sum()),
         duplicate_triangles=duplicate_count(mesh.triangles),
         shells=shells,
         volume=signed_volume(corners),
-        area=float(triangle_areas(corners).sum()),
+        area=float(areas.sum()),
     )
 
 

@@ -8,6 +8,8 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .cad import CadModel, read_cad
 from .checks import MeshChecks, check_mesh, float32_degenerate_count, manifold3d_accepts
 from .errors import AmprepError, ErrorCode
@@ -125,9 +127,10 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
         notes.append("STL input passed through: no unit in the file, values taken as millimetres")
     if mesh.n_triangles == 0:
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the model produced no triangles")
-    checks = check_mesh(mesh)
+    degenerate = np.zeros(mesh.n_triangles, bool)
+    checks = check_mesh(mesh, degenerate)
     ok3d = manifold3d_accepts(mesh)
-    rounded = float32_degenerate_count(mesh)
+    rounded = float32_degenerate_count(mesh, degenerate)
     if rounded:
         notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
                      "store (a part far from the origin at a micron tolerance)")

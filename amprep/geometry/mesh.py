@@ -17,7 +17,7 @@ class FaceInfo:
     id: int
     surface_type: str
     solid: int = 0
-    meshed_by: str = "occt"  # occt | fallback | stored (tessellated-only input) | stl
+    meshed_by: str = "occt"  # occt | refined (OCCT's, mended where over tolerance) | fallback | stored | stl
 
 
 @dataclass(frozen=True, eq=False)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from OCP.Bnd import Bnd_Box
+from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepBndLib import BRepBndLib
 from OCP.GeomAbs import GeomAbs_Circle
@@ -18,6 +19,7 @@ from .chordal import COMPILED_MIN_POINTS, barycentric_grid, load_kernels, triang
 from .errors import AmprepError, ErrorCode
 from .fallback import mesh_face, split_edge_to_tolerance
 from .mesh import FaceInfo, Mesh
+from .patch_refine import refine_patch
 from .progress import Progress, ProgressFn
 from .surfaces import Surface, surface_of
 from .tessellate import (
@@ -48,6 +50,14 @@ COARSEN_TARGET = 0.95
 COARSEN_EXCESS = 1.1
 #: and only for a group of faces where that saves at least this fraction of their triangles (re-meshing costs time)
 COARSEN_MIN_GAIN = 0.2
+
+
+#: a face of at least LOCAL_MIN_TRIANGLES with at most LOCAL_MAX_BAD of them over the target is refined where they
+#: are (patch_refine.py); any other is meshed again whole: a fresh CDT packs the points better than OCCT's layout
+#: can be mended (a countersink cone's apex fan: 90 triangles re-meshed, 124 mended), and a small face costs little;
+#: so is a face with a pole or apex (a degenerated edge), where points mended into OCCT's fan make tilted triangles
+LOCAL_MIN_TRIANGLES = 1000
+LOCAL_MAX_BAD = 0.25
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,7 +197,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                 and not _within_on_a_finer_grid(patches[i], surfaces[i], errors[i], tol)]
         if not over:
             break
-        todo = set(over)
+        todo = set()
         for i in over:  # a face's own boundary chords bound its error: split edges whose sagitta exceeds tol
             for edge in face_edges(model.faces[i]):
                 ei = topo.edge_index(edge)
@@ -198,6 +208,18 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                 if len(after) != len(before):
                     topo.edge_params[ei] = after
                     todo |= _faces_of_edge(model, topo, ei)
+        for i in over:  # a face whose boundary stands is refined where it fails, the rest of its mesh kept
+            if (i in todo or surfaces[i] is None or patches[i].uv is None  # type: ignore[union-attr]
+                    or len(errors[i]) < LOCAL_MIN_TRIANGLES or np.mean(errors[i] > target) > LOCAL_MAX_BAD
+                    or any(BRep_Tool.Degenerated_s(e) for e in face_edges(model.faces[i]))):
+                todo.add(i)
+                continue
+            refined = refine_patch(patches[i], errors[i], surfaces[i], target, params.sample_order)  # type: ignore[arg-type]
+            if refined is None or _has_zero_area(refined, min_area):  # at a cone apex a (u,v) line is one point
+                todo.add(i)
+            else:
+                patches[i], errors[i] = refined, refined.error  # type: ignore[assignment]
+            fallback.setdefault(i, "tolerance")
         for i in todo:
             fallback.setdefault(i, "tolerance")
         prog("enforcing tolerance", 0.5 + 0.08 * (round_ + 1))
