@@ -23,17 +23,28 @@ class EdgeIncidence:
 
 
 def edge_incidence(triangles: np.ndarray) -> EdgeIncidence:
-    """Undirected edge table of (m, 3) triangles; side k of a triangle joins corners k and k+1."""
-    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
-    lo = directed.min(axis=1)
-    hi = directed.max(axis=1)
-    key = lo * (int(triangles.max(initial=0)) + 1) + hi
-    uniq, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
-    forward = np.bincount(inverse, weights=(directed[:, 0] < directed[:, 1]), minlength=len(uniq))
-    first = np.zeros(len(uniq), np.int64)
-    first[inverse[::-1]] = np.arange(len(key))[::-1]
-    edges = np.stack([lo[first], hi[first]], axis=1)
-    return EdgeIncidence(edges, count, forward.astype(np.int64), inverse.reshape(-1, 3))
+    """Undirected edge table of (m, 3) triangles; side k of a triangle joins corners k and k+1 (edges ordered by
+    (low, high) vertex index, as np.unique would give them)."""
+    a = triangles.ravel().astype(np.int64)
+    b = np.roll(triangles, -1, axis=1).ravel().astype(np.int64)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    n, k = int(triangles.max(initial=0)) + 1, len(a)
+    key = lo * n + hi
+    if k and n * n * k < 2**62:  # key and position in one int64: a plain (SIMD) sort, ~5× faster than argsort
+        packed = np.sort(key * k + np.arange(k))
+        perm, ordered = packed % k, packed // k
+    else:
+        perm = np.argsort(key)
+        ordered = key[perm]
+    start = np.ones(k, bool)
+    np.not_equal(ordered[1:], ordered[:-1], out=start[1:])
+    inverse = np.empty(k, np.int64)
+    inverse[perm] = np.cumsum(start) - 1
+    first = np.flatnonzero(start)
+    count = np.diff(np.append(first, k))
+    forward = np.bincount(inverse, weights=a < b, minlength=len(first)).astype(np.int64)
+    edges = np.stack([lo[perm[first]], hi[perm[first]]], axis=1)
+    return EdgeIncidence(edges, count, forward, inverse.reshape(-1, 3))
 
 
 def triangle_areas(corners: np.ndarray) -> np.ndarray:
@@ -111,13 +122,16 @@ def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.
 
 
 def duplicate_count(triangles: np.ndarray) -> int:
-    """Triangles whose vertex set repeats an earlier triangle's: (m, 3) sorted per row, rows lexsorted, equal
-    neighbours counted."""
+    """Triangles whose vertex set repeats an earlier triangle's: (m, 3) sorted per row, rows sorted (as one int64
+    key when the indices allow), equal neighbours counted."""
     if len(triangles) < 2:
         return 0
-    srt = np.sort(triangles, axis=1)
-    order = np.lexsort((srt[:, 2], srt[:, 1], srt[:, 0]))
-    srt = srt[order]
+    srt = np.sort(triangles, axis=1).astype(np.int64)
+    n = int(srt.max()) + 1
+    if n**3 < 2**62:
+        key = np.sort((srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2])
+        return int((key[1:] == key[:-1]).sum())
+    srt = srt[np.lexsort((srt[:, 2], srt[:, 1], srt[:, 0]))]
     return int((srt[1:] == srt[:-1]).all(axis=1).sum())
 
 
