@@ -348,10 +348,14 @@ def _has_zero_area(patch: FacePatch, min_area: float = 0.0, rel_eps: float = 1e-
     same_vertex = (((v[:, 0] == v[:, 1]) & (v[:, 0] >= 0)) | ((v[:, 1] == v[:, 2]) & (v[:, 1] >= 0))
                    | ((v[:, 0] == v[:, 2]) & (v[:, 0] >= 0)))
     distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
-    area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
-    longest = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2).max(axis=1)
-    thin = (area2 <= 2 * rel_eps * longest**2) | (area2 <= 2 * min_area)
-    return bool((distinct & thin & (longest > 0)).any())
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    cross = np.cross(e1, e2)
+    area2_sq = np.einsum("ij,ij->i", cross, cross)  # (2·area)², compared squared: no square roots
+    e3 = e2 - e1
+    longest_sq = np.maximum(np.maximum(np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e2, e2)),
+                            np.einsum("ij,ij->i", e3, e3))
+    thin = (area2_sq <= (2 * rel_eps) ** 2 * longest_sq**2) | (area2_sq <= (2 * min_area) ** 2)
+    return bool((distinct & thin & (longest_sq > 0)).any())
 
 
 def _faces_of_edge(model: CadModel, topo: Topology, edge_index: int) -> set[int]:
