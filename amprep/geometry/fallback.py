@@ -11,7 +11,7 @@ from OCP.BRepTools import BRepTools_WireExplorer
 from OCP.GCPnts import GCPnts_TangentialDeflection
 from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .chordal import triangle_chordal_error
 from .errors import AmprepError, ErrorCode
@@ -108,14 +108,35 @@ def _metric_scale(surface: Surface, uv: np.ndarray) -> np.ndarray:
     return np.where(s > 1e-12, s, 1.0)
 
 
-def _cdt(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None) -> np.ndarray:
+def triangulate_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None = None) -> np.ndarray:
+    """(t, 3) constrained Delaunay triangles of points (n, 2) and segments (s, 2), nothing added on a segment, the
+    parts holding a hole point (h, 2) and outside the segments removed. Triangle crashes the process on two equal
+    points or a hole point outside the convex hull: equal or non-finite points raise meshing_failed, hole points
+    outside are dropped (the outside is removed anyway); segments crossing raise meshing_failed."""
+    if not np.isfinite(pts).all():
+        raise AmprepError(ErrorCode.MESHING_FAILED, "a face's (u,v) boundary has non-finite points")
+    z = np.ascontiguousarray(pts, dtype=np.float64).view(np.complex128).ravel()  # a point as one sortable value
+    if len(np.unique(z)) != len(z):
+        raise AmprepError(ErrorCode.MESHING_FAILED, "a face's boundary touches itself in (u,v)")
     data = dict(vertices=pts, segments=segments)
-    if holes is not None and len(holes):
-        data["holes"] = holes
+    if holes is not None and len(holes) and len(pts) >= 3:
+        try:
+            eq = ConvexHull(pts).equations
+        except QhullError:  # all points on a line: nothing to triangulate, nothing to hole
+            eq = None
+        if eq is not None:
+            size = float(np.ptp(pts, axis=0).max())
+            inside = holes[(holes @ eq[:, :2].T + eq[:, 2] < -1e-9 * size).all(axis=1)]
+            if len(inside):
+                data["holes"] = inside
     out = tr.triangulate(data, "pYQ")
     if len(out.get("vertices", [])) != len(pts):
         raise AmprepError(ErrorCode.MESHING_FAILED, "the face's boundary in (u,v) self-intersects")
     return out.get("triangles", np.zeros((0, 3), np.int64)).astype(np.int64)
+
+
+def _cdt(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None) -> np.ndarray:
+    return triangulate_pslg(pts, segments, holes)
 
 
 def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:

@@ -7,11 +7,18 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import triangle as tr
-from scipy.spatial import ConvexHull
 
 from .chordal import triangle_chordal_error
-from .fallback import MAX_ROUNDS, MIN_SPACING, _apart, _insertion_points, _metric_scale, _triangle_codes
+from .errors import AmprepError
+from .fallback import (
+    MAX_ROUNDS,
+    MIN_SPACING,
+    _apart,
+    _insertion_points,
+    _metric_scale,
+    _triangle_codes,
+    triangulate_pslg,
+)
 from .surfaces import Surface
 from .tessellate import FacePatch
 
@@ -43,20 +50,15 @@ def _retriangulate(pts: np.ndarray, region: np.ndarray, outside_seeds: np.ndarra
     once = first[count == 1]
     a, b = local.ravel(), np.roll(local, -1, axis=1).ravel()
     segments = np.stack([a[once], b[once]], axis=1)
-    data = dict(vertices=np.concatenate([pts[nodes], new]), segments=segments)
-    if len(outside_seeds):
-        # Triangle crashes on a hole point outside the convex hull (the exterior is eaten without one anyway)
-        eq = ConvexHull(data["vertices"]).equations
-        size = np.ptp(data["vertices"], axis=0).max()
-        inside = (outside_seeds @ eq[:, :2].T + eq[:, 2] < -1e-9 * size).all(axis=1)
-        if inside.any():
-            data["holes"] = outside_seeds[inside]
-    out = tr.triangulate(data, "pYQ")
-    tris = out.get("triangles", np.zeros((0, 3), np.int64)).astype(np.int64)
-    if len(out.get("vertices", [])) != len(data["vertices"]) or len(tris) != len(region) + 2 * len(new):
+    vertices = np.concatenate([pts[nodes], new])
+    try:
+        tris = triangulate_pslg(vertices, segments, outside_seeds)
+    except AmprepError:
+        return None
+    if len(tris) != len(region) + 2 * len(new):
         return None
     area_old = np.abs(_signed_area2(pts, region)).sum()
-    area_new = _signed_area2(data["vertices"], tris)
+    area_new = _signed_area2(vertices, tris)
     if (area_new <= 0).any() or abs(area_new.sum() - area_old) > AREA_RTOL * area_old:
         return None
     return nodes, tris

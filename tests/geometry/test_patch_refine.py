@@ -105,3 +105,30 @@ def test_large_faces_occt_leaves_over_tolerance_are_mended_not_re_meshed():
     assert len(occt.tris) < n < 1.01 * len(occt.tris)
     c = check_mesh(r.mesh)
     assert c.closed and c.degenerate_triangles == 0 and r.max_error <= 0.01
+
+
+def test_inputs_that_crash_triangle_are_refused_or_cleaned_first():
+    """Triangle (C) takes the whole process down on two equal points joined by segments (a face whose boundary
+    touches itself in (u,v)) and on a hole point outside the convex hull: triangulate_pslg refuses the first with
+    meshing_failed and drops the second. Run in a child process, so a crash fails this test, not the run."""
+    import subprocess
+    import sys
+
+    code = """
+import numpy as np
+from amprep.geometry.errors import AmprepError
+from amprep.geometry.fallback import triangulate_pslg
+square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+ring = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+pinched = np.vstack([square, [[0.5, 0.5], [0.5, 0.5]]])
+for pts, seg in ((pinched, np.vstack([ring, [[0, 4], [5, 2]]])), (np.vstack([square, [[np.nan, 0]]]), ring)):
+    try:
+        triangulate_pslg(pts, seg)
+        print("accepted")
+    except AmprepError as exc:
+        print(exc.code.value)
+print(len(triangulate_pslg(square, ring, np.array([[5.0, 5.0], [-1.0, 0.5]]))))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["meshing_failed", "meshing_failed", "2"]
