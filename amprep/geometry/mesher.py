@@ -7,7 +7,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from OCP.Bnd import Bnd_Box
-from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepBndLib import BRepBndLib
 from OCP.GeomAbs import GeomAbs_Circle
@@ -17,9 +16,9 @@ from .cad import CadModel
 from .checks import DEGENERATE_REL_AREA
 from .chordal import COMPILED_MIN_POINTS, barycentric_grid, load_kernels, triangle_chordal_error
 from .errors import AmprepError, ErrorCode
-from .fallback import mesh_face, split_edge_to_tolerance
+from .fallback import has_pole, mesh_face, split_edge_to_tolerance
 from .mesh import FaceInfo, Mesh
-from .patch_refine import refine_patch
+from .patch_refine import flat_triangles, flip_flat_triangles, refine_patch
 from .progress import Progress, ProgressFn
 from .surfaces import Surface, surface_of
 from .tessellate import (
@@ -177,7 +176,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                 seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
             try:
                 patches[i] = mesh_face(i, model.faces[i], topo, surf, tol * ENFORCE_MARGIN, params.angular,
-                                       params.sample_order, seeds)
+                                       params.sample_order, seeds, min_area)
             except AmprepError:
                 patches[i] = None
                 unmeshed.append(i)
@@ -211,11 +210,13 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
         for i in over:  # a face whose boundary stands is refined where it fails, the rest of its mesh kept
             if (i in todo or surfaces[i] is None or patches[i].uv is None  # type: ignore[union-attr]
                     or len(errors[i]) < LOCAL_MIN_TRIANGLES or np.mean(errors[i] > target) > LOCAL_MAX_BAD
-                    or any(BRep_Tool.Degenerated_s(e) for e in face_edges(model.faces[i]))):
+                    or has_pole(model.faces[i])):
                 todo.add(i)
                 continue
             refined = refine_patch(patches[i], errors[i], surfaces[i], target, params.sample_order)  # type: ignore[arg-type]
-            if refined is None or _has_zero_area(refined, min_area):  # at a cone apex a (u,v) line is one point
+            if refined is not None:
+                refined = flip_flat_triangles(refined, surfaces[i], target, params.sample_order, min_area)  # type: ignore[arg-type]
+            if refined is None or _has_zero_area(refined, min_area):
                 todo.add(i)
             else:
                 patches[i], errors[i] = refined, refined.error  # type: ignore[assignment]
@@ -338,24 +339,9 @@ def _within_on_a_finer_grid(patch: FacePatch | None, surface: Surface | None, er
     return True
 
 
-def _has_zero_area(patch: FacePatch, min_area: float = 0.0, rel_eps: float = 1e-10) -> bool:
-    """True when a triangle that the weld keeps (three distinct nodes, not two on one B-rep vertex) has
-    area ≤ rel_eps · (its longest edge)² (a needle) or ≤ min_area (a sliver thinner than the output's
-    degenerate-triangle check allows)."""
-    c = patch.nodes[patch.tris]
-    t = patch.tris
-    v = patch.node_vertex[t]
-    same_vertex = (((v[:, 0] == v[:, 1]) & (v[:, 0] >= 0)) | ((v[:, 1] == v[:, 2]) & (v[:, 1] >= 0))
-                   | ((v[:, 0] == v[:, 2]) & (v[:, 0] >= 0)))
-    distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
-    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
-    cross = np.cross(e1, e2)
-    area2_sq = np.einsum("ij,ij->i", cross, cross)  # (2·area)², compared squared: no square roots
-    e3 = e2 - e1
-    longest_sq = np.maximum(np.maximum(np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e2, e2)),
-                            np.einsum("ij,ij->i", e3, e3))
-    thin = (area2_sq <= (2 * rel_eps) ** 2 * longest_sq**2) | (area2_sq <= (2 * min_area) ** 2)
-    return bool((distinct & thin & (longest_sq > 0)).any())
+def _has_zero_area(patch: FacePatch, min_area: float = 0.0) -> bool:
+    """True when a triangle the weld keeps is flat (patch_refine.flat_triangles)."""
+    return bool(flat_triangles(patch, min_area).any())
 
 
 def _faces_of_edge(model: CadModel, topo: Topology, edge_index: int) -> set[int]:

@@ -10,17 +10,18 @@ import numpy as np
 
 from .chordal import triangle_chordal_error
 from .errors import AmprepError
-from .fallback import (
-    MAX_ROUNDS,
-    MIN_SPACING,
-    _apart,
-    _insertion_points,
-    _metric_scale,
-    _triangle_codes,
-    triangulate_pslg,
-)
 from .surfaces import Surface
 from .tessellate import FacePatch
+from .uv_cdt import (
+    MAX_ROUNDS,
+    MIN_SPACING,
+    apart,
+    in_sorted,
+    insertion_points,
+    metric_scale,
+    triangle_codes,
+    triangulate_pslg,
+)
 
 #: a re-triangulated region must cover the (u,v) area it replaced to this relative precision
 AREA_RTOL = 1e-9
@@ -72,7 +73,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     (`error` of the result is set). None when a region cannot be re-triangulated (a fold in the face's (u,v))."""
     assert patch.uv is not None
     tris, err = patch.tris, np.asarray(error, float)
-    scale = _metric_scale(surface, patch.uv)
+    scale = metric_scale(surface, patch.uv)
     pts = patch.uv * scale
     xyz, uv = patch.nodes, patch.uv
     sign = 1.0 if _signed_area2(pts, tris).sum() >= 0 else -1.0
@@ -88,15 +89,18 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         marked[tris[bad]] = True
         in_region = marked[tris].any(axis=1)
         region = tris[in_region]
-        new = _insertion_points(pts, tris[bad], boundary, base)
-        new = _apart(new, pts[np.unique(region)], MIN_SPACING * tolerance)
+        new = insertion_points(pts, tris[bad], boundary, base)
+        new = apart(new, pts[np.unique(region)], MIN_SPACING * tolerance)
         if not len(new):
             break
         # a hole seed in every kept triangle across an inner edge of the region's border: Triangle must not fill
-        # what the region surrounds
-        rim_codes = np.setdiff1d(_edge_codes(region, base), boundary)
-        rim = np.zeros(len(tris), bool)
-        rim[~in_region] = np.isin(_edge_codes(tris[~in_region], base), rim_codes).any(axis=1)
+        # what the region surrounds (candidates: kept triangles with two nodes in the region)
+        in_nodes = np.zeros(len(pts), bool)
+        in_nodes[region] = True
+        near = np.flatnonzero(~in_region & (in_nodes[tris].sum(axis=1) >= 2))
+        rim_codes = np.unique(_edge_codes(region, base))
+        rim_codes = rim_codes[~in_sorted(rim_codes, boundary)]
+        rim = near[in_sorted(_edge_codes(tris[near], base), rim_codes).any(axis=1)]
         seeds = pts[tris[rim]].mean(axis=1)
         done = _retriangulate(pts, region, seeds, new)
         if done is None:
@@ -109,10 +113,10 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         pts = np.concatenate([pts, new])
         uv = np.concatenate([uv, new / scale])
         xyz = np.concatenate([xyz, surface.evaluate(uv[-len(new):])])
-        old_code, old_err = _triangle_codes(region, len(pts)), err[in_region]
+        old_code, old_err = triangle_codes(region, len(pts)), err[in_region]
         fresh_err = np.empty(len(fresh))
         if old_code is not None:
-            new_code = _triangle_codes(fresh, len(pts))
+            new_code = triangle_codes(fresh, len(pts))
             order_ = np.argsort(old_code)
             pos = np.minimum(np.searchsorted(old_code[order_], new_code), len(old_code) - 1)
             seen = old_code[order_][pos] == new_code
@@ -129,3 +133,60 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
                    node_edge=np.concatenate([patch.node_edge, np.full(k, -1, np.int64)]),
                    node_param=np.concatenate([patch.node_param, np.full(k, np.nan)]),
                    meshed_by="refined" if patch.meshed_by == "occt" else patch.meshed_by, error=err)
+
+
+#: a triangle is a needle when its area ≤ this × (longest edge)²
+NEEDLE_REL_AREA = 1e-10
+
+
+def flat_triangles(patch: FacePatch, min_area: float = 0.0, rel_eps: float = NEEDLE_REL_AREA) -> np.ndarray:
+    """(t,) bool: triangles the weld keeps (three distinct nodes, not two on one B-rep vertex) whose area is
+    ≤ rel_eps · (longest edge)² (a needle) or ≤ min_area (thinner than the output's degenerate check allows)."""
+    c = patch.nodes[patch.tris]
+    t = patch.tris
+    v = patch.node_vertex[t]
+    same_vertex = (((v[:, 0] == v[:, 1]) & (v[:, 0] >= 0)) | ((v[:, 1] == v[:, 2]) & (v[:, 1] >= 0))
+                   | ((v[:, 0] == v[:, 2]) & (v[:, 0] >= 0)))
+    distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    cross = np.cross(e1, e2)
+    area2_sq = np.einsum("ij,ij->i", cross, cross)  # (2·area)², compared squared: no square roots
+    e3 = e2 - e1
+    longest_sq = np.maximum(np.maximum(np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e2, e2)),
+                            np.einsum("ij,ij->i", e3, e3))
+    thin = (area2_sq <= (2 * rel_eps) ** 2 * longest_sq**2) | (area2_sq <= (2 * min_area) ** 2)
+    return distinct & thin & (longest_sq > 0)
+
+
+def flip_flat_triangles(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6,
+                        min_area: float = 0.0) -> FacePatch:
+    """The patch with each flat triangle (flat_triangles) swapped with its neighbour across its longest edge for the
+    other diagonal of their quad, where both new triangles keep the patch's (u,v) orientation, are not flat and are
+    within the tolerance: next to a pole or apex, where a line of (u,v) is one point, a Delaunay triangulation in
+    (u,v) joins three points that are collinear in space. Flat triangles with no such flip are left (the caller
+    sees them with flat_triangles)."""
+    flat = np.flatnonzero(flat_triangles(patch, min_area))
+    if not len(flat) or patch.uv is None or patch.error is None:
+        return patch
+    tris, err = patch.tris.copy(), patch.error.copy()
+    sign = 1.0 if _signed_area2(patch.uv, tris).sum() >= 0 else -1.0
+    for t in flat:
+        c = patch.nodes[tris[t]]
+        k = int(np.argmax(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1)))  # side k joins corners k, k+1
+        a, b, opposite = tris[t, k], tris[t, (k + 1) % 3], tris[t, (k + 2) % 3]
+        across = np.flatnonzero(((tris == b) | (tris == a)).sum(axis=1) == 2)
+        across = across[across != t]
+        if len(across) != 1:
+            continue  # the longest side is on the face's boundary: no flip
+        n = across[0]
+        d = int(tris[n][(tris[n] != a) & (tris[n] != b)][0])
+        new = np.array([[a, d, opposite], [d, b, opposite]])
+        trial = replace(patch, tris=new, error=None)
+        if (sign * _signed_area2(patch.uv, new) <= 0).any() or flat_triangles(trial, min_area).any():
+            continue
+        e = triangle_chordal_error(patch.nodes[new], patch.uv[new], surface, order, affine=surface.affine)
+        if e.max() > tolerance:
+            continue
+        tris[t], tris[n] = new
+        err[t], err[n] = e
+    return replace(patch, tris=tris, error=err)

@@ -266,15 +266,15 @@ def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     seeded points now keep MIN_SPACING × tolerance from every other node."""
     from scipy.spatial import cKDTree
 
-    from amprep.geometry import fallback
+    from amprep.geometry import fallback, uv_cdt
     from amprep.geometry.surfaces import surface_of
     from amprep.geometry.tessellate import Topology, extract_patch, run_brepmesh
 
     pts = np.array([[0.0, 0.0], [1.0, 0.0]])
     new = np.array([[0.0, 5e-6], [0.5, 0.5], [0.5, 0.5 + 5e-6], [2.0, 2.0]])
-    assert np.array_equal(fallback._apart(new, pts, 1e-5), new[[1, 3]])
+    assert np.array_equal(uv_cdt.apart(new, pts, 1e-5), new[[1, 3]])
     model = read_cad(corpus("nist_ctc02_ap242.stp"))
-    run_brepmesh(model.shape, 0.001, MeshParams(tolerance=0.001))
+    run_brepmesh(model.shape, 0.001, MeshParams(tolerance=0.001, occt_surface_control=True))  # its dense interior
     topo = Topology.of(model.shape)
     face = model.faces[174]
     occt = extract_patch(174, face, topo)
@@ -282,7 +282,7 @@ def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     patch = fallback.mesh_face(174, face, topo, surface_of(face), 0.00098, 0.5, seeds=seeds)
     inner = (patch.node_edge < 0) & (patch.node_vertex < 0)
     spacing = cKDTree(patch.nodes).query(patch.nodes[inner], k=2)[0][:, 1]
-    assert spacing.min() > 0.5 * fallback.MIN_SPACING * 0.001
+    assert spacing.min() > 0.5 * uv_cdt.MIN_SPACING * 0.001
     corners = patch.nodes[patch.tris[inner[patch.tris].all(axis=1)]].astype(np.float32).astype(np.float64)
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     assert area.min() > 1e-7
