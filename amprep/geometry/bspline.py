@@ -33,7 +33,19 @@ def basis_functions(knots: np.ndarray, degree: int, t: np.ndarray, span: np.ndar
 
 
 COMPILED_MIN_POINTS = 100_000
+#: numpy evaluation a process may do (points; B-spline points count 3× closed-form ones, being ~5× slower) before
+#: loading numba (0.5 s once) pays: many small calls add up once refinement drives them
+NUMPY_BUDGET = 1_500_000
 _kernel = None
+_numpy_work = 0
+
+
+def spend_numpy(points: int) -> bool:
+    """Count `points` of numpy evaluation in this process; False once the total passes NUMPY_BUDGET (time to load
+    the compiled kernels)."""
+    global _numpy_work
+    _numpy_work += points
+    return _numpy_work < NUMPY_BUDGET
 _CHUNK = 65536
 
 
@@ -74,11 +86,12 @@ def eval_surface(
 ) -> np.ndarray:
     """(N, 3) S(u,v) = Σ N_i(u) N_j(v) w_ij P_ij / Σ N_i(u) N_j(v) w_ij; poles (nu, nv, 3), weights (nu, nv).
 
-    Calls of ≥ COMPILED_MIN_POINTS points (and every call once the kernel is loaded) run the numba kernel of
-    _bspline_kernel.py; smaller ones run numpy, so a small part never pays numba's ~0.7 s start-up."""
+    Calls of ≥ COMPILED_MIN_POINTS points, every call once the process's numpy work passes NUMPY_BUDGET, and every
+    call once the kernel is loaded run the numba kernel of _bspline_kernel.py; the others run numpy, so a small part
+    never pays numba's ~0.7 s start-up."""
     global _kernel
     pw = np.ascontiguousarray(np.concatenate([poles * weights[..., None], weights[..., None]], axis=2))
-    if _kernel is None and len(uv) < COMPILED_MIN_POINTS:
+    if _kernel is None and len(uv) < COMPILED_MIN_POINTS and spend_numpy(3 * len(uv)):
         return _eval_surface_numpy(pw, uknots, vknots, udeg, vdeg, np.asarray(uv, dtype=np.float64))
     if _kernel is None:
         load_kernel()

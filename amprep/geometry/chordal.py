@@ -45,13 +45,16 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
 
 def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray) -> np.ndarray | None:
     """ε_T by the fused, threaded kernel of _chordal_kernel.py, or None where the surface has none (OCCT-evaluated
-    kinds) or the call is too small to pay numba's start-up before the kernel is loaded."""
+    kinds) or the call is too small to pay numba's start-up before the kernel is loaded (while the process's numpy
+    work stays under bspline.NUMPY_BUDGET)."""
     kind = surface.closed_form
     d = surface.data if surface.surface_type in ("bspline", "bezier") else None
     if kind is None and d is None:
         return None
     if _kernels is None:
-        if len(corners) * len(w) < COMPILED_MIN_POINTS and not _bspline.kernel_loaded():
+        points = len(corners) * len(w)  # a B-spline's numpy points are counted where they are evaluated
+        if (points < COMPILED_MIN_POINTS and not _bspline.kernel_loaded()
+                and (d is not None or _bspline.spend_numpy(points))):
             return None
         load_kernels()
     assert _kernels is not None

@@ -71,3 +71,14 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
                 np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-9)
     assert kinds >= ({"plane", "cylinder", "cone", "sphere", "torus", "bspline"} if source == "reference"
                      else {"plane", "cylinder", "bspline"})
+
+
+def test_many_small_numpy_evaluations_add_up_to_loading_the_kernels(monkeypatch):
+    """Refinement evaluates in many small calls; once their numpy work passes NUMPY_BUDGET the compiled kernels are
+    loaded (each call alone stays under COMPILED_MIN_POINTS, so a per-call rule never would)."""
+    from amprep.geometry import bspline
+
+    monkeypatch.setattr(bspline, "_numpy_work", 0)
+    monkeypatch.setattr(bspline, "NUMPY_BUDGET", 10)
+    assert bspline.spend_numpy(4) and bspline.spend_numpy(5)
+    assert not bspline.spend_numpy(1) and not bspline.spend_numpy(1)
