@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 
@@ -67,9 +69,19 @@ def _eval_surface_numpy(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, 
     return out
 
 
+def fork_safe_threads() -> None:
+    """Have numba start its threads with its workqueue layer unless the user chose one: GNU OpenMP's threads abort
+    a forked child (face_pool forks workers)."""
+    if "NUMBA_THREADING_LAYER" not in os.environ:
+        from numba import config
+
+        config.THREADING_LAYER = "workqueue"
+
+
 def load_kernel() -> None:
     """Import numba and the compiled B-spline kernel (~0.7 s once per process; cached machine code after)."""
     global _kernel
+    fork_safe_threads()
     from ._bspline_kernel import eval_surface_kernel
 
     _kernel = eval_surface_kernel

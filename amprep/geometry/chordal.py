@@ -21,10 +21,16 @@ def load_kernels() -> None:
     """Load the compiled kernels now (mesh_model does when the whole part is large): every later call uses them."""
     global _kernels
     if _kernels is None:
+        _bspline.fork_safe_threads()
         from . import _chordal_kernel
 
         _kernels = _chordal_kernel
         _bspline.load_kernel()
+
+
+def kernels_loaded() -> bool:
+    """True once every chordal measure in this process runs the compiled kernels."""
+    return _kernels is not None
 
 
 @lru_cache(maxsize=32)

@@ -57,6 +57,14 @@ def split_edge_to_tolerance(edge: TopoDS_Edge, params: np.ndarray, tolerance: fl
     return params
 
 
+def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> None:
+    """Give every edge of the face with no discretisation yet its own (discretize_edge), in topo.edge_params."""
+    for edge in face_edges(face):
+        ei = topo.edge_index(edge)
+        if ei not in topo.edge_params:
+            topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
+
+
 def has_pole(face: TopoDS_Face) -> bool:
     """True when the face has a degenerated edge (a pole or apex: a line of its (u,v) maps to one point)."""
     return any(BRep_Tool.Degenerated_s(e) for e in face_edges(face))

@@ -14,9 +14,10 @@ from OCP.TopoDS import TopoDS
 
 from .cad import CadModel
 from .checks import DEGENERATE_REL_AREA
-from .chordal import COMPILED_MIN_POINTS, barycentric_grid, load_kernels, triangle_chordal_error
+from .chordal import COMPILED_MIN_POINTS, barycentric_grid, kernels_loaded, load_kernels, triangle_chordal_error
 from .errors import AmprepError, ErrorCode
-from .fallback import has_pole, mesh_face, split_edge_to_tolerance
+from .face_pool import map_faces
+from .fallback import discretize_missing_edges, has_pole, mesh_face, split_edge_to_tolerance
 from .mesh import FaceInfo, Mesh
 from .patch_refine import flat_triangles, flip_flat_triangles, refine_patch
 from .progress import Progress, ProgressFn
@@ -165,20 +166,29 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     unmeshed: list[int] = []
     for round_ in range(ENFORCE_ROUNDS + 1):
         stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
-        for k, i in enumerate(sorted(todo)):
-            stage("re-meshing faces", 0.5 * k / max(len(todo), 1))
-            surf = surfaces[i]
-            if surf is None:
-                continue
+        stage("re-meshing faces", 0.0)
+        remesh = [i for i in todo if surfaces[i] is not None]
+        for i in remesh:  # every edge discretised here, before faces are meshed apart from each other
+            discretize_missing_edges(model.faces[i], topo, tol * ENFORCE_MARGIN, params.angular)
+
+        def remesh_face(i: int, coarsened: set[int] = coarsened) -> FacePatch | None:
             old = patches[i]
             seeds = None
             if old is not None and old.uv is not None and i not in coarsened:
                 seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
             try:
-                patches[i] = mesh_face(i, model.faces[i], topo, surf, tol * ENFORCE_MARGIN, params.angular,
-                                       params.sample_order, seeds, min_area)
+                return mesh_face(i, model.faces[i], topo, surfaces[i], tol * ENFORCE_MARGIN,  # type: ignore[arg-type]
+                                 params.angular, params.sample_order, seeds, min_area)
             except AmprepError:
-                patches[i] = None
+                return None
+
+        size = {i: len(patches[i].nodes) if patches[i] is not None else 0 for i in remesh}  # type: ignore[union-attr]
+        # in parallel only once the compiled kernels run every chordal measure (numpy's floats differ in the last
+        # bits, and which faces a process would measure in numpy depends on timing): the result stays deterministic
+        order_ = sorted(remesh, key=lambda i: (size[i], i))
+        for i, patch in map_faces(remesh_face, order_, ready=kernels_loaded).items():
+            patches[i] = patch
+            if patch is None:
                 unmeshed.append(i)
         if round_ == 0 and occt_params:
             back = _revert_coarsening_that_grew(model, topo, patches, occt_patches, occt_params, fallback)

@@ -1,0 +1,52 @@
+"""Faces meshed in forked worker processes give the very mesh the serial loop gives; a dying worker is an error."""
+
+import os
+
+import numpy as np
+import pytest
+
+from amprep.geometry import face_pool
+from amprep.geometry.cad import read_cad
+from amprep.geometry.chordal import load_kernels
+from amprep.geometry.errors import AmprepError, ErrorCode
+from amprep.geometry.mesher import mesh_model
+from amprep.geometry.tessellate import MeshParams
+from tests.conftest import corpus
+
+
+@pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
+def test_faces_meshed_in_worker_processes_equal_the_serial_mesh(monkeypatch):
+    """OCCT's sample part at 0.1 mm (faces re-meshed by the fallback), once with every face in the pool from the
+    first and once serially: the same vertices and triangles, bit for bit."""
+    load_kernels()  # the pool is used only once every measure is compiled
+    model = read_cad(corpus("occt_top_invalid.brep"))
+    calls = []
+    real = face_pool.ProcessPoolExecutor
+
+    def counting(*args, **kwargs):
+        calls.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(face_pool, "SERIAL_SECONDS", 0.0)
+    monkeypatch.setattr(face_pool, "ProcessPoolExecutor", counting)
+    pooled = mesh_model(model, MeshParams(tolerance=0.1))
+    assert calls, "the pool was not used"
+    monkeypatch.setattr(face_pool, "can_fork", lambda: False)
+    serial = mesh_model(model, MeshParams(tolerance=0.1))
+    assert pooled.fallback_faces == serial.fallback_faces
+    assert np.array_equal(pooled.mesh.vertices, serial.mesh.vertices)
+    assert np.array_equal(pooled.mesh.triangles, serial.mesh.triangles)
+    assert np.array_equal(pooled.face_error, serial.face_error, equal_nan=True)
+
+
+@pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
+def test_a_worker_that_dies_is_a_meshing_error_not_a_hang():
+    def die(i):
+        if i == 3:
+            os._exit(1)
+        return i
+
+    with pytest.raises(AmprepError) as exc:
+        face_pool.map_faces(die, range(6), serial_seconds=0.0)
+    assert exc.value.code == ErrorCode.MESHING_FAILED
+    assert face_pool.map_faces(lambda i: i * i, range(5), serial_seconds=0.0) == {i: i * i for i in range(5)}
