@@ -1,6 +1,7 @@
-"""Bring a meshed face within tolerance where only some of its triangles exceed it: re-triangulate just the
-neighbourhood of those triangles (constrained Delaunay in scaled (u,v), new points inserted), keeping the rest of
-the mesh and every boundary node, so a face OCCT meshed 99 % right is not meshed again from scratch."""
+"""Bring a meshed face within tolerance by re-triangulating only the neighbourhood of the triangles that exceed it
+(constrained Delaunay in scaled (u,v), new points inserted), keeping the rest of the mesh and every boundary node:
+each round costs what it adds, not the face's size. Mends OCCT's mesh of a face and refines the fallback's; flat
+triangles next to an apex are flipped away."""
 
 from __future__ import annotations
 
