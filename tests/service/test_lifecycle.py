@@ -18,8 +18,8 @@ from amprep.serve import free_port
 from tests.conftest import corpus
 from tests.service.conftest import KEY_A, KEY_B, SECRET, submit, wait_status
 
-SLOW = "nist_ctc02_ap242.stp"  # seconds of work at 0.03 mm: long enough to act on mid-job
-SLOW_PARAMS = '{"tolerance": 0.03, "reuse": false}'
+SLOW = "nist_ctc02_ap242.stp"  # seconds of work at 0.01 mm: long enough to act on mid-job
+SLOW_PARAMS = '{"tolerance": 0.01, "reuse": false}'
 PART = "voron_vhb_din_mount.step"
 
 
@@ -132,7 +132,7 @@ def test_callback_retries_with_backoff(service, receiver):
 def test_callback_on_cancel_and_never_blocking_jobs(service, receiver):
     url, rec = receiver
     with service.client() as c:
-        job = submit(c, corpus(SLOW), params=json.dumps({"callback_url": url, "tolerance": 0.03, "reuse": False})).json()
+        job = submit(c, corpus(SLOW), params=json.dumps({"callback_url": url, "tolerance": 0.01, "reuse": False})).json()
         wait_status(c, job["id"], ("running",))
         c.delete(f"/v1/jobs/{job['id']}")
     _wait_calls(rec, 1)
@@ -141,7 +141,7 @@ def test_callback_on_cancel_and_never_blocking_jobs(service, receiver):
 
 def test_worker_killed_mid_job_the_job_still_finishes(service):
     with service.client() as c:
-        job = submit(c, corpus(SLOW), params='{"tolerance": 0.05, "reuse": false}').json()
+        job = submit(c, corpus(SLOW), params=SLOW_PARAMS).json()
         running = wait_status(c, job["id"], ("running",))
         time.sleep(0.5)
         os.kill(_worker_pid(running), signal.SIGKILL)
@@ -152,7 +152,7 @@ def test_worker_killed_mid_job_the_job_still_finishes(service):
 
 def test_input_that_kills_its_worker_twice_fails_with_worker_crashed(service):
     with service.client() as c:
-        job = submit(c, corpus(SLOW), params='{"tolerance": 0.05, "reuse": false}').json()
+        job = submit(c, corpus(SLOW), params=SLOW_PARAMS).json()
         killed = set()
         for _ in range(2):
             deadline = time.monotonic() + 60
