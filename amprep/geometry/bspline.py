@@ -40,6 +40,7 @@ COMPILED_MIN_POINTS = 100_000
 NUMPY_BUDGET = 1_500_000
 _kernel = None
 _numpy_work = 0
+_CHUNK = 65536
 
 
 def spend_numpy(points: int) -> bool:
@@ -48,7 +49,6 @@ def spend_numpy(points: int) -> bool:
     global _numpy_work
     _numpy_work += points
     return _numpy_work < NUMPY_BUDGET
-_CHUNK = 65536
 
 
 def _eval_surface_numpy(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, udeg: int, vdeg: int,

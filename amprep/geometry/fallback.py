@@ -16,7 +16,16 @@ from .errors import AmprepError, ErrorCode
 from .patch_refine import flip_flat_triangles, refine_patch
 from .surfaces import Surface
 from .tessellate import FacePatch, Topology, explore, face_edges
-from .uv_cdt import MAX_ROUNDS, MIN_SPACING, apart, insertion_points, metric_scale, triangle_codes, triangulate_pslg
+from .uv_cdt import (
+    MAX_ROUNDS,
+    MIN_SPACING,
+    apart,
+    insertion_points,
+    metric_scale,
+    recall_errors,
+    triangle_codes,
+    triangulate_pslg,
+)
 
 
 def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
@@ -71,7 +80,9 @@ def has_pole(face: TopoDS_Face) -> bool:
 
 
 def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
-    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,)."""
+    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,); an edge with
+    no discretisation yet gets one."""
+    discretize_missing_edges(face, topo, tolerance, angular)
     loops = []
     for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
         uvs, verts, edges, pars = [], [], [], []
@@ -80,8 +91,6 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             edge = TopoDS.Edge_s(wexp.Current())
             ei = topo.edge_index(edge)
             degenerate = BRep_Tool.Degenerated_s(edge)
-            if ei not in topo.edge_params:
-                topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
             params = topo.edge_params[ei]
             if edge.Orientation() == TopAbs_REVERSED:
                 params = params[::-1]
@@ -165,7 +174,8 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         # and a local re-triangulation leaves tilted triangles in the fan)
         refined = None if has_pole(face) else refine_patch(patch, err, surface, tolerance, order)
         if refined is None:
-            pts, tris, xyz, err = _refine_globally(pts, tris, segments, holes, scale, xyz, surface, tolerance, order)
+            pts, tris, xyz, err = _refine_globally(pts, tris, err, segments, holes, scale, xyz, surface, tolerance,
+                                                   order)
             k = len(pts) - len(node_vertex)
             refined = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris,
                                 np.concatenate([node_vertex, np.full(k, -1, np.int64)]),
@@ -175,30 +185,24 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
 
 
-def _refine_globally(pts: np.ndarray, tris: np.ndarray, segments: np.ndarray, holes: np.ndarray, scale: np.ndarray,
-                     xyz: np.ndarray, surface: Surface, tolerance: float,
+def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segments: np.ndarray, holes: np.ndarray,
+                     scale: np.ndarray, xyz: np.ndarray, surface: Surface, tolerance: float,
                      order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The robust path when a local re-triangulation cannot be made: points inserted in every triangle over the
-    tolerance and the whole face triangulated again, until none is over; returns (pts, tris, xyz, error)."""
+    tolerance and the whole face triangulated again, until none is over (`err` (t,): the error of the first `tris`);
+    returns (pts, tris, xyz, error)."""
     affine = surface.affine
     final_err = None
-    known_code, known_err = np.zeros(0, np.int64), np.zeros(0)
+    known_code, known_err = triangle_codes(tris, len(pts)), err
     for _ in range(MAX_ROUNDS):
         uv = pts / scale
         if len(xyz) < len(pts):  # points are only ever appended: evaluate the new ones
             xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
         code = triangle_codes(tris, len(pts))
-        err = np.empty(len(tris))
-        seen = np.zeros(len(tris), bool)
-        if code is not None and len(known_code):
-            pos = np.minimum(np.searchsorted(known_code, code), len(known_code) - 1)
-            seen = known_code[pos] == code
-            err[seen] = known_err[pos[seen]]
+        seen, err = recall_errors(len(tris), code, known_code, known_err)
         fresh = ~seen
         err[fresh] = triangle_chordal_error(xyz[tris[fresh]], uv[tris[fresh]], surface, order, affine=affine)
-        if code is not None:
-            order_ = np.argsort(code)
-            known_code, known_err = code[order_], err[order_]
+        known_code, known_err = code, err
         bad = err > tolerance
         if not bad.any():
             final_err = err

@@ -135,7 +135,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
         elif p.meshed_by == "occt" and not check_patch_boundary(p):
             fallback[i] = "broken_triangulation"
             p = None
-        elif p.meshed_by == "occt" and _has_zero_area(p, min_area):
+        elif p.meshed_by == "occt" and flat_triangles(p, min_area).any():
             fallback[i] = "degenerate_triangles"
             p = None
         patches.append(p)
@@ -226,12 +226,11 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
             refined = refine_patch(patches[i], errors[i], surfaces[i], target, params.sample_order)  # type: ignore[arg-type]
             if refined is not None:
                 refined = flip_flat_triangles(refined, surfaces[i], target, params.sample_order, min_area)  # type: ignore[arg-type]
-            if refined is None or _has_zero_area(refined, min_area):
+            if refined is None or flat_triangles(refined, min_area).any():
                 todo.add(i)
             else:
                 patches[i], errors[i] = refined, refined.error  # type: ignore[assignment]
-            fallback.setdefault(i, "tolerance")
-        for i in todo:
+        for i in todo.union(over):
             fallback.setdefault(i, "tolerance")
         prog("enforcing tolerance", 0.5 + 0.08 * (round_ + 1))
     infos = tuple(
@@ -347,11 +346,6 @@ def _within_on_a_finer_grid(patch: FacePatch | None, surface: Surface | None, er
         return False
     error[band] = np.maximum(error[band], fine)
     return True
-
-
-def _has_zero_area(patch: FacePatch, min_area: float = 0.0) -> bool:
-    """True when a triangle the weld keeps is flat (patch_refine.flat_triangles)."""
-    return bool(flat_triangles(patch, min_area).any())
 
 
 def _faces_of_edge(model: CadModel, topo: Topology, edge_index: int) -> set[int]:

@@ -20,6 +20,7 @@ from .uv_cdt import (
     in_sorted,
     insertion_points,
     metric_scale,
+    recall_errors,
     triangle_codes,
     triangulate_pslg,
 )
@@ -114,16 +115,8 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         pts = np.concatenate([pts, new])
         uv = np.concatenate([uv, new / scale])
         xyz = np.concatenate([xyz, surface.evaluate(uv[-len(new):])])
-        old_code, old_err = triangle_codes(region, len(pts)), err[in_region]
-        fresh_err = np.empty(len(fresh))
-        if old_code is not None:
-            new_code = triangle_codes(fresh, len(pts))
-            order_ = np.argsort(old_code)
-            pos = np.minimum(np.searchsorted(old_code[order_], new_code), len(old_code) - 1)
-            seen = old_code[order_][pos] == new_code
-            fresh_err[seen] = old_err[order_][pos[seen]]
-        else:
-            seen = np.zeros(len(fresh), bool)
+        seen, fresh_err = recall_errors(len(fresh), triangle_codes(fresh, len(pts)), triangle_codes(region, len(pts)),
+                                        err[in_region])
         fresh_err[~seen] = triangle_chordal_error(xyz[fresh[~seen]], uv[fresh[~seen]], surface, order,
                                                   affine=surface.affine)
         tris = np.concatenate([tris[~in_region], fresh])

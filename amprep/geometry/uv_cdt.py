@@ -63,6 +63,22 @@ def triangle_codes(tris: np.ndarray, n_points: int) -> np.ndarray | None:
     return (s[:, 0] * _CODE_BASE + s[:, 1]) * _CODE_BASE + s[:, 2]
 
 
+def recall_errors(n: int, codes: np.ndarray | None, old_codes: np.ndarray | None,
+                  old_err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(seen (n,) bool, err (n,)) for n triangles with triangle_codes `codes`: which were measured before, err[seen]
+    their earlier error (old_codes (s,) with old_err (s,), any order); err is unset where not seen, and nothing is
+    seen when either side has no codes."""
+    seen, err = np.zeros(n, bool), np.empty(n)
+    if codes is None or old_codes is None or not len(old_codes):
+        return seen, err
+    order = np.argsort(old_codes)
+    known = old_codes[order]
+    pos = np.minimum(np.searchsorted(known, codes), len(known) - 1)
+    seen = known[pos] == codes
+    err[seen] = old_err[order][pos[seen]]
+    return seen, err
+
+
 def apart(new: np.ndarray, pts: np.ndarray, eps: float) -> np.ndarray:
     """The new (k, 2) points farther than eps from every existing point and from each other (the first kept): two
     nodes closer than that gain nothing and may round to one vertex in a float32 STL (a degenerate triangle)."""

@@ -143,7 +143,7 @@ def test_slivers_thinner_than_the_degenerate_check_send_the_face_to_the_fallback
     """OCCT leaves a 36 nm high sliver on two B-spline faces of CTC-02's twin at 0.01 mm: not a needle by its own
     edge (area/L² ≈ 5e-4) but degenerate for the output check (area ≤ 1e-12 · diagonal²), so the face is re-meshed."""
     from amprep.geometry.checks import DEGENERATE_REL_AREA
-    from amprep.geometry.mesher import _has_zero_area
+    from amprep.geometry.patch_refine import flat_triangles
     from amprep.geometry.tessellate import FacePatch
 
     nodes = np.array([[174.90300131, -229.69594043, 86.50283839], [174.90164246, -229.71095813, 86.51537158],
@@ -152,9 +152,9 @@ def test_slivers_thinner_than_the_degenerate_check_send_the_face_to_the_fallback
     none = np.full(4, -1)
     patch = FacePatch(0, nodes, None, tris, none, none, np.full(4, np.nan))
     diag = 1100.0  # CTC-02's bounding-box diagonal, mm
-    assert not _has_zero_area(patch)  # not a needle by the triangle's own proportions
-    assert _has_zero_area(patch, DEGENERATE_REL_AREA * diag**2)
-    assert not _has_zero_area(patch, DEGENERATE_REL_AREA * 100.0**2)  # on a 100 mm part it is a fine triangle
+    assert not flat_triangles(patch).any()  # not a needle by the triangle's own proportions
+    assert flat_triangles(patch, DEGENERATE_REL_AREA * diag**2).any()
+    assert not flat_triangles(patch, DEGENERATE_REL_AREA * 100.0**2).any()  # on a 100 mm part it is a fine triangle
 
 
 @pytest.mark.parametrize("name", ["as1_assembly_ap214.stp", "nist_ctc02_ap242.stp", "featuretype_inch_ap214.step"])
