@@ -28,6 +28,34 @@ def load_kernels() -> None:
         _bspline.load_kernel()
 
 
+def warm_kernels() -> None:
+    """load_kernels(), then one call of each kernel on a small cylinder and B-spline face, with the argument types
+    of real calls: numba's first dispatch (its typing registry, ~0.3 s) is paid here, e.g. while another process
+    reads the file."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.GeomAPI import GeomAPI_PointsToBSplineSurface
+    from OCP.gp import gp_Pnt
+    from OCP.TColgp import TColgp_Array2OfPnt
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from .surfaces import surface_of
+
+    load_kernels()
+    grid = TColgp_Array2OfPnt(1, 4, 1, 4)
+    for i in range(1, 5):
+        for j in range(1, 5):
+            grid.SetValue(i, j, gp_Pnt(i, j, 0.1 * i * j))
+    patch = BRepBuilderAPI_MakeFace(GeomAPI_PointsToBSplineSurface(grid).Surface(), 1e-6).Face()
+    cylinder = TopoDS.Face_s(TopExp_Explorer(BRepPrimAPI_MakeCylinder(1.0, 1.0).Shape(), TopAbs_FACE).Current())
+    uv = np.array([[[0.1, 0.1], [0.5, 0.1], [0.1, 0.5]]])
+    for face in (cylinder, patch):
+        surface = surface_of(face)
+        triangle_chordal_error(surface.evaluate(uv[0])[None], uv, surface)
+
+
 def kernels_loaded() -> bool:
     """True once every chordal measure in this process runs the compiled kernels."""
     return _kernels is not None

@@ -13,12 +13,14 @@ import numpy as np
 from .cad import CadModel, read_cad
 from .checks import MeshChecks, check_mesh, float32_degenerate_count, manifold3d_accepts
 from .errors import AmprepError, ErrorCode
+from .forked import Forked
 from .formats import CAD_FORMATS, sniff_path
 from .io_3mf import write_3mf
 from .io_stl import read_stl, write_stl
 from .mesh import Mesh
 from .mesher import MeshResult, mesh_model
 from .progress import ProgressFn
+from .read_ahead import read_and_mesh_ahead
 from .tessellate import MeshParams
 
 
@@ -101,6 +103,17 @@ def load(path: str | Path) -> CadModel | Mesh:
     return read_stl(path)
 
 
+#: output checks of a mesh this large run beside manifold3d's in a forked child (forking costs ~10 ms)
+FORK_CHECKS_MIN = 100_000
+
+
+def output_checks(mesh: Mesh) -> tuple[MeshChecks, int]:
+    """(check_mesh, float32_degenerate_count) of a mesh."""
+    degenerate = np.zeros(mesh.n_triangles, bool)
+    checks = check_mesh(mesh, degenerate)
+    return checks, float32_degenerate_count(mesh, degenerate)
+
+
 def convert(path: str | Path, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> ConvertResult:
     """Read `path` and return its closed mesh within tolerance (CAD) or its checked mesh (STL passthrough)."""
     params.validate()
@@ -111,13 +124,13 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
     if fmt in CAD_FORMATS:
         if progress:
             progress("reading", 0.0)
-        model = read_cad(path, fmt)
+        model, meshed_at = read_and_mesh_ahead(path, fmt, params)
         info.update(units=model.units, solids=model.solids, faces=len(model.faces))
         if model.units == "none":
             notes.append("the file declares no length unit: read as millimetres")
         if model.sewn:
             notes.append("loose faces were sewn into shells")
-        meshing = mesh_model(model, params, progress)
+        meshing = mesh_model(model, params, progress, meshed_at)
         mesh = meshing.mesh
         if meshing.unmeshed_faces:
             notes.append(f"{len(meshing.unmeshed_faces)} face(s) could not be meshed")
@@ -127,10 +140,13 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
         notes.append("STL input passed through: no unit in the file, values taken as millimetres")
     if mesh.n_triangles == 0:
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the model produced no triangles")
-    degenerate = np.zeros(mesh.n_triangles, bool)
-    checks = check_mesh(mesh, degenerate)
+    # our own checks in a forked child while manifold3d (which holds the GIL) runs here
+    own = Forked(output_checks, mesh, fork=mesh.n_triangles >= FORK_CHECKS_MIN)
     ok3d = manifold3d_accepts(mesh)
-    rounded = float32_degenerate_count(mesh, degenerate)
+    try:
+        checks, rounded = own.result()
+    except AmprepError:  # the child died: check here
+        checks, rounded = output_checks(mesh)
     if rounded:
         notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
                      "store (a part far from the origin at a micron tolerance)")

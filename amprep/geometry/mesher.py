@@ -111,15 +111,18 @@ def patch_error(patch: FacePatch, surface: Surface | None, order: int) -> np.nda
                                   affine=surface.affine)
 
 
-def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> MeshResult:
+def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: ProgressFn | None = None,
+               meshed_at: float | None = None) -> MeshResult:
     """Tessellate every face; re-mesh from the shared edge discretisation any face OCCT leaves unmeshed or
     broken, and any face whose chordal error exceeds the tolerance (splitting its edges where their own
-    sagitta does), until every face is within tolerance; weld by topology."""
+    sagitta does), until every face is within tolerance; weld by topology. `meshed_at`: the absolute tolerance
+    run_brepmesh already meshed the shape at with these params (read_ahead.py), so it is not run again."""
     params.validate()
     prog = Progress(progress)
-    tol = absolute_tolerance(model, params)
+    tol = absolute_tolerance(model, params) if meshed_at is None else meshed_at
     prog("meshing", 0.0)
-    run_brepmesh(model.shape, tol, params)
+    if meshed_at is None:
+        run_brepmesh(model.shape, tol, params)
     prog("meshing", 0.4)
     topo = Topology.of(model.shape)
     n_faces = len(model.faces)
@@ -182,11 +185,11 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
             except AmprepError:
                 return None
 
-        size = {i: len(patches[i].nodes) if patches[i] is not None else 0 for i in remesh}  # type: ignore[union-attr]
+        cost = {i: _remesh_cost(patches[i], errors[i], tol * ENFORCE_MARGIN) for i in remesh}
         # in parallel only once the compiled kernels run every chordal measure (numpy's floats differ in the last
         # bits, and which faces a process would measure in numpy depends on timing): the result stays deterministic
-        order_ = sorted(remesh, key=lambda i: (size[i], i))
-        for i, patch in map_faces(remesh_face, order_, ready=kernels_loaded).items():
+        order_ = sorted(remesh, key=lambda i: (-cost[i], i))
+        for i, patch in map_faces(remesh_face, order_, ready=kernels_loaded, cost=[cost[i] for i in order_]).items():
             patches[i] = patch
             if patch is None:
                 unmeshed.append(i)
@@ -243,6 +246,16 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, fallback, tuple(sorted(set(unmeshed))))
+
+
+def _remesh_cost(patch: FacePatch | None, error: np.ndarray, target: float) -> float:
+    """Triangles a face's new mesh is expected to have: Σ max(1, ε_T / target) over its old triangles (ε ∝ h², so a
+    triangle ε/target over the target needs about that many in its place); its boundary nodes when it has none."""
+    if patch is None:
+        return 0.0
+    if len(error) != len(patch.tris) or not len(error):
+        return float(len(patch.tris))
+    return float(np.maximum(np.nan_to_num(error / target, nan=1.0), 1.0).sum())
 
 
 def coarsen_circle_edges(model: CadModel, topo: Topology, patches: list[FacePatch | None],

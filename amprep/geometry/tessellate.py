@@ -9,6 +9,7 @@ meshed inconsistently with their edges, are meshed again from the shared edge di
 from __future__ import annotations
 
 import io
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +67,16 @@ class MeshParams:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, bad)
 
 
+_pool_started = False  # True once this process ran BRepMesh in parallel (OCCT's thread pool then has threads)
+
+
+def occt_pool_untouched() -> bool:
+    """True when this process has not run OCCT in parallel, as far as it can tell (no parallel run_brepmesh, no
+    cadquery imported): a forked child may then start OCCT's thread pool itself. After a fork the pool's threads
+    of the parent are gone but its state says they exist, and a parallel BRepMesh in the child waits for ever."""
+    return not _pool_started and "cadquery" not in sys.modules
+
+
 def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams) -> None:
     """Clear any earlier triangulation (a stale one is silently reused otherwise), then BRepMesh the shape (edges
     at the tolerance; face interiors without OCCT's surface deflection control unless occt_surface_control)."""
@@ -75,6 +86,9 @@ def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams) -> N
     p.Angle = params.angular
     p.Relative = False
     p.InParallel = params.parallel
+    if params.parallel:
+        global _pool_started
+        _pool_started = True
     p.MinSize = params.min_size if params.min_size > 0 else max(tolerance * 0.1, 1e-7)
     p.MeshAlgo = IMeshTools_MeshAlgoType_Delabella if params.algorithm == "delabella" else IMeshTools_MeshAlgoType_Watson
     # OCCT's interior deflection control (test points, insert, re-triangulate, repeat) is 90 % of its time on

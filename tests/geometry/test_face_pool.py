@@ -1,6 +1,7 @@
 """Faces meshed in forked worker processes give the very mesh the serial loop gives; a dying worker is an error."""
 
 import os
+import time
 
 import numpy as np
 import pytest
@@ -21,16 +22,16 @@ def test_faces_meshed_in_worker_processes_equal_the_serial_mesh(monkeypatch):
     load_kernels()  # the pool is used only once every measure is compiled
     model = read_cad(corpus("occt_top_invalid.brep"))
     calls = []
-    real = face_pool.ProcessPoolExecutor
+    real = face_pool.Forked
 
     def counting(*args, **kwargs):
         calls.append(args)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(face_pool, "SERIAL_SECONDS", 0.0)
-    monkeypatch.setattr(face_pool, "ProcessPoolExecutor", counting)
+    monkeypatch.setattr(face_pool, "PARALLEL_MIN_COST", 0.0)
+    monkeypatch.setattr(face_pool, "Forked", counting)
     pooled = mesh_model(model, MeshParams(tolerance=0.1))
-    assert calls, "the pool was not used"
+    assert calls, "no worker was forked"
     monkeypatch.setattr(face_pool, "can_fork", lambda: False)
     serial = mesh_model(model, MeshParams(tolerance=0.1))
     assert pooled.fallback_faces == serial.fallback_faces
@@ -41,12 +42,41 @@ def test_faces_meshed_in_worker_processes_equal_the_serial_mesh(monkeypatch):
 
 @pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
 def test_a_worker_that_dies_is_a_meshing_error_not_a_hang():
+    parent = os.getpid()
+
     def die(i):
-        if i == 3:
+        time.sleep(0.01)
+        if os.getpid() != parent:
             os._exit(1)
         return i
 
     with pytest.raises(AmprepError) as exc:
-        face_pool.map_faces(die, range(6), serial_seconds=0.0)
+        face_pool.map_faces(die, range(40), parallel_min=0)
     assert exc.value.code == ErrorCode.MESHING_FAILED
-    assert face_pool.map_faces(lambda i: i * i, range(5), serial_seconds=0.0) == {i: i * i for i in range(5)}
+    assert face_pool.map_faces(lambda i: i * i, range(5), parallel_min=0) == {i: i * i for i in range(5)}
+
+
+@pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
+def test_every_process_takes_work_and_errors_come_back():
+    """Ids are shared out one at a time (the parent and a child both compute some); a child's AmprepError is raised
+    with its own code; the serial path below parallel_min never forks."""
+    def who(i):
+        time.sleep(0.01)
+        return os.getpid()
+
+    out = face_pool.map_faces(who, range(30), parallel_min=0, workers=2)
+    assert sorted(out) == list(range(30))
+    assert os.getpid() in out.values() and len(set(out.values())) == 2
+    serial = face_pool.map_faces(who, range(5), cost=[1.0] * 5, parallel_min=10)
+    assert set(serial.values()) == {os.getpid()}
+    parent = os.getpid()
+
+    def fail(i):
+        time.sleep(0.01)
+        if os.getpid() != parent:
+            raise AmprepError(ErrorCode.EMPTY_MODEL, "from a child")
+        return i
+
+    with pytest.raises(AmprepError) as exc:
+        face_pool.map_faces(fail, range(30), parallel_min=0, workers=2)
+    assert exc.value.code == ErrorCode.EMPTY_MODEL

@@ -1,0 +1,60 @@
+"""Read and BRepMesh a CAD file in a forked child while this process loads the compiled kernels: reading a STEP
+and OCCT's meshing hold the GIL, and so does numba's start-up, so only two processes overlap them. The child hands
+the meshed shape back in OCCT's binary BREP (triangulations and edge polygons included, read back in ~20 ms for
+CTC-02), so the caller continues exactly as if it had read and meshed it itself."""
+
+from __future__ import annotations
+
+import io
+from dataclasses import replace
+from pathlib import Path
+
+from OCP.BinTools import BinTools, BinTools_FormatVersion
+from OCP.TopoDS import TopoDS_Shape
+
+from .cad import CadModel, model_from_shape, read_cad
+from .chordal import kernels_loaded, warm_kernels
+from .errors import AmprepError, ErrorCode
+from .forked import Forked
+from .mesher import absolute_tolerance
+from .tessellate import MeshParams, occt_pool_untouched, run_brepmesh
+
+#: kernels are warmed only when the child has not finished within this many seconds: a file that reads and meshes
+#: faster is small, and may never need them
+WARM_AFTER = 0.15
+
+
+def read_and_mesh(path: str | Path, fmt: str, params: MeshParams) -> tuple[CadModel, float]:
+    """(model, absolute tolerance) of a CAD file, read and meshed by run_brepmesh in this process."""
+    model = read_cad(path, fmt)
+    tol = absolute_tolerance(model, params)
+    run_brepmesh(model.shape, tol, params)
+    return model, tol
+
+
+def _child(path: str, fmt: str, params: MeshParams) -> tuple[bytes, str, bool, float]:
+    model, tol = read_and_mesh(path, fmt, params)
+    buf = io.BytesIO()
+    BinTools.Write_s(model.shape, buf, True, False, BinTools_FormatVersion.BinTools_FormatVersion_VERSION_3)
+    return buf.getvalue(), model.units, model.sewn, tol
+
+
+def read_and_mesh_ahead(path: str | Path, fmt: str, params: MeshParams) -> tuple[CadModel, float]:
+    """read_and_mesh, in a forked child while this process warms the kernels (when they are not loaded yet and a
+    second core exists; in this process otherwise). OCCT's parallel meshing runs in the child only when this
+    process never started OCCT's thread pool. A child that dies (OCCT crashing on the file) is unreadable_cad."""
+    if kernels_loaded():
+        return read_and_mesh(path, fmt, params)
+    child_params = replace(params, parallel=params.parallel and occt_pool_untouched())
+    job = Forked(_child, str(path), fmt, child_params,
+                 died=(ErrorCode.UNREADABLE_CAD, f"OCCT crashed reading or meshing the {fmt.upper()} file"))
+    if not job.forked:
+        return read_and_mesh(path, fmt, params)
+    if not job.ready(WARM_AFTER):
+        warm_kernels()
+    data, units, sewn, tol = job.result()
+    shape = TopoDS_Shape()
+    BinTools.Read_s(shape, io.BytesIO(data))
+    if shape.IsNull():
+        raise AmprepError(ErrorCode.MESHING_FAILED, "the meshed shape did not come back from the reading process")
+    return model_from_shape(shape, fmt, units, sewn), tol

@@ -1,0 +1,101 @@
+"""Work in a forked child: results and errors come back; reading and meshing in a child gives the very mesh reading
+and meshing here gives; the checks computed beside manifold3d equal the checks computed here."""
+
+import os
+
+import numpy as np
+import pytest
+
+from amprep.geometry import read_ahead
+from amprep.geometry.convert import FORK_CHECKS_MIN, convert, output_checks
+from amprep.geometry.errors import AmprepError, ErrorCode
+from amprep.geometry.forked import Forked, fork_available
+from amprep.geometry.mesher import mesh_model
+from amprep.geometry.tessellate import MeshParams, occt_pool_untouched, run_brepmesh
+from tests.conftest import corpus
+
+needs_fork = pytest.mark.skipif(not fork_available(), reason="no fork or a single core here")
+
+
+@needs_fork
+def test_a_forked_call_returns_its_value_and_its_errors():
+    parent = os.getpid()
+    job = Forked(lambda a, b: (os.getpid(), a + b), 2, 3)
+    assert job.forked
+    pid, total = job.result()
+    assert total == 5 and pid != parent
+    assert Forked(lambda: 7, fork=False).result() == 7  # inline
+
+    def empty():
+        raise AmprepError(ErrorCode.EMPTY_MODEL, "nothing")
+
+    with pytest.raises(AmprepError) as exc:
+        Forked(empty).result()
+    assert exc.value.code == ErrorCode.EMPTY_MODEL and exc.value.message == "nothing"
+
+    def crash():
+        os._exit(3)
+
+    with pytest.raises(AmprepError) as exc:
+        Forked(crash, died=(ErrorCode.UNREADABLE_CAD, "it died")).result()
+    assert exc.value.code == ErrorCode.UNREADABLE_CAD
+
+    def bug():
+        raise ValueError("a bug")
+
+    with pytest.raises(AmprepError) as exc:
+        Forked(bug).result()
+    assert exc.value.code == ErrorCode.INTERNAL_ERROR
+
+
+@needs_fork
+@pytest.mark.parametrize("name, tol", [("nist_ctc02_ap242.stp", 0.1), ("featuretype_inch_ap214.step", 0.05)])
+def test_reading_and_meshing_in_a_child_gives_the_same_mesh(monkeypatch, name, tol):
+    """The shape comes back through OCCT's binary BREP with its triangulations and edge polygons: welded by topology
+    it is the mesh of reading and meshing here, bit for bit, closed, with the unit and tolerance of the file."""
+    params = MeshParams(tolerance=tol, parallel=False)
+    here, tol_here = read_ahead.read_and_mesh(corpus(name), "step", params)
+    monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)  # forks only while the kernels are not loaded
+    calls = []
+    real = read_ahead.Forked
+
+    def counting(*args, **kwargs):
+        job = real(*args, **kwargs)
+        calls.append(job.forked)
+        return job
+
+    monkeypatch.setattr(read_ahead, "Forked", counting)
+    there, tol_there = read_ahead.read_and_mesh_ahead(corpus(name), "step", params)
+    assert calls == [True]
+    assert tol_there == tol_here and there.units == here.units and len(there.faces) == len(here.faces)
+    assert there.face_solid == here.face_solid
+    a = mesh_model(here, params, meshed_at=tol_here)
+    b = mesh_model(there, params, meshed_at=tol_there)
+    assert np.array_equal(a.mesh.vertices, b.mesh.vertices)
+    assert np.array_equal(a.mesh.triangles, b.mesh.triangles)
+    assert a.fallback_faces == b.fallback_faces
+
+
+@needs_fork
+def test_an_unreadable_file_read_in_a_child_is_unreadable_cad(monkeypatch, tmp_path):
+    bad = tmp_path / "bad.step"
+    bad.write_text("ISO-10303-21;\nHEADER;\nENDSEC;\nDATA;\n#1=FOO(;\nENDSEC;\nEND-ISO-10303-21;\n")
+    monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)
+    with pytest.raises(AmprepError) as exc:
+        read_ahead.read_and_mesh_ahead(bad, "step", MeshParams())
+    assert exc.value.code in (ErrorCode.UNREADABLE_CAD, ErrorCode.EMPTY_MODEL)
+
+
+def test_a_parallel_brepmesh_marks_the_thread_pool_used(reference_solids):
+    """A child may not mesh in parallel once this process has (OCCT's pool would wait for the parent's threads)."""
+    run_brepmesh(reference_solids["cylinder"], 0.1, MeshParams(tolerance=0.1, parallel=True))
+    assert not occt_pool_untouched()
+
+
+@needs_fork
+def test_checks_beside_manifold3d_equal_the_checks_here():
+    r = convert(corpus("nist_ctc02_ap242.stp"), MeshParams(tolerance=0.02))
+    assert r.mesh.n_triangles >= FORK_CHECKS_MIN  # so convert computed them in a child
+    checks, rounded = output_checks(r.mesh)
+    assert checks == r.checks and rounded == r.float32_degenerate
+    assert r.checks.closed and r.manifold3d
