@@ -63,15 +63,30 @@ def scratch(udeg, vdeg):
     return np.empty(udeg + 1), np.empty(vdeg + 1), np.empty(deg), np.empty(deg)
 
 
+#: points per block of the parallel kernel (one thread each); a call of at most one block runs eval_surface_serial
+EVAL_BLOCK = 4096
+
+
+@njit(cache=True, nogil=True)
+def _eval_range(pw, uknots, vknots, udeg, vdeg, uv, out, start, stop):
+    """out[start:stop] ← S(uv[start:stop])."""
+    bu, bv, left, right = scratch(udeg, vdeg)
+    for k in range(start, stop):
+        x, y, z = point_kernel(pw, uknots, vknots, udeg, vdeg, uv[k, 0], uv[k, 1], bu, bv, left, right)
+        out[k, 0] = x
+        out[k, 1] = y
+        out[k, 2] = z
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def eval_surface_kernel(pw, uknots, vknots, udeg, vdeg, uv, out):
     """out (N, 3) ← S(uv (N, 2)), in blocks over the threads."""
     n = uv.shape[0]
-    block = 4096
-    for blk in prange((n + block - 1) // block):
-        bu, bv, left, right = scratch(udeg, vdeg)
-        for k in range(blk * block, min(n, (blk + 1) * block)):
-            x, y, z = point_kernel(pw, uknots, vknots, udeg, vdeg, uv[k, 0], uv[k, 1], bu, bv, left, right)
-            out[k, 0] = x
-            out[k, 1] = y
-            out[k, 2] = z
+    for blk in prange((n + EVAL_BLOCK - 1) // EVAL_BLOCK):
+        _eval_range(pw, uknots, vknots, udeg, vdeg, uv, out, blk * EVAL_BLOCK, min(n, (blk + 1) * EVAL_BLOCK))
+
+
+@njit(cache=True, nogil=True)
+def eval_surface_serial(pw, uknots, vknots, udeg, vdeg, uv, out):
+    """eval_surface_kernel on the calling thread only (a parallel launch costs ~0.1 ms: more than a small call)."""
+    _eval_range(pw, uknots, vknots, udeg, vdeg, uv, out, 0, uv.shape[0])

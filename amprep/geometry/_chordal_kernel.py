@@ -58,39 +58,72 @@ def _distance(c, nx, ny, nz, xyz):
     return abs((xyz[0] - c[0, 0]) * nx + (xyz[1] - c[0, 1]) * ny + (xyz[2] - c[0, 2]) * nz)
 
 
+#: triangles per block of the parallel B-spline kernel; calls of at most one block (and every analytic call of at
+#: most this many) run the serial kernels: a parallel launch costs ~0.1 ms
+BLOCK = 1024
+
+
+@njit(cache=True, nogil=True)
+def _analytic_one(kind, prm, corners, uv, w, stop, m):
+    c = corners[m]
+    nx, ny, nz, ok = _unit_normal(c)
+    best = 0.0
+    if ok:
+        for p in range(w.shape[0]):
+            u, v = _sample(w, uv, m, p)
+            best = max(best, _distance(c, nx, ny, nz, _analytic(kind, prm, u, v)))
+            if best > stop:
+                break
+    return best
+
+
 @njit(cache=True, nogil=True, parallel=True)
-def analytic_chordal_kernel(kind, prm, corners, uv, w, out):
-    """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m|; corners (M,3,3), uv (M,3,2), w (P,3)."""
+def analytic_chordal_kernel(kind, prm, corners, uv, w, stop, out):
+    """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m|; corners (M,3,3), uv (M,3,2), w (P,3); a
+    triangle's points stop at the first over `stop` (out[m] is then a value > stop, not the maximum)."""
     for m in prange(corners.shape[0]):
+        out[m] = _analytic_one(kind, prm, corners, uv, w, stop, m)
+
+
+@njit(cache=True, nogil=True)
+def analytic_chordal_serial(kind, prm, corners, uv, w, stop, out):
+    """analytic_chordal_kernel on the calling thread only."""
+    for m in range(corners.shape[0]):
+        out[m] = _analytic_one(kind, prm, corners, uv, w, stop, m)
+
+
+@njit(cache=True, nogil=True)
+def _bspline_range(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out, start, end):
+    bu, bv, left, right = scratch(udeg, vdeg)
+    for m in range(start, end):
         c = corners[m]
         nx, ny, nz, ok = _unit_normal(c)
         best = 0.0
         if ok:
             for p in range(w.shape[0]):
                 u, v = _sample(w, uv, m, p)
-                best = max(best, _distance(c, nx, ny, nz, _analytic(kind, prm, u, v)))
+                if uper[1] > uper[0]:
+                    u = uper[0] + (u - uper[0]) % (uper[1] - uper[0])
+                if vper[1] > vper[0]:
+                    v = vper[0] + (v - vper[0]) % (vper[1] - vper[0])
+                xyz = point_kernel(pw, uknots, vknots, udeg, vdeg, u, v, bu, bv, left, right)
+                best = max(best, _distance(c, nx, ny, nz, xyz))
+                if best > stop:
+                    break
         out[m] = best
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def bspline_chordal_kernel(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, out):
+def bspline_chordal_kernel(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
     """The same for a rational B-spline (poles·weights | weights (nu, nv, 4)); a periodic direction's parameter is
     wrapped into [uper[0], uper[1]) (uper[1] ≤ uper[0]: not periodic)."""
     n = corners.shape[0]
-    block = 1024
-    for blk in prange((n + block - 1) // block):
-        bu, bv, left, right = scratch(udeg, vdeg)
-        for m in range(blk * block, min(n, (blk + 1) * block)):
-            c = corners[m]
-            nx, ny, nz, ok = _unit_normal(c)
-            best = 0.0
-            if ok:
-                for p in range(w.shape[0]):
-                    u, v = _sample(w, uv, m, p)
-                    if uper[1] > uper[0]:
-                        u = uper[0] + (u - uper[0]) % (uper[1] - uper[0])
-                    if vper[1] > vper[0]:
-                        v = vper[0] + (v - vper[0]) % (vper[1] - vper[0])
-                    xyz = point_kernel(pw, uknots, vknots, udeg, vdeg, u, v, bu, bv, left, right)
-                    best = max(best, _distance(c, nx, ny, nz, xyz))
-            out[m] = best
+    for blk in prange((n + BLOCK - 1) // BLOCK):
+        _bspline_range(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out, blk * BLOCK,
+                       min(n, (blk + 1) * BLOCK))
+
+
+@njit(cache=True, nogil=True)
+def bspline_chordal_serial(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
+    """bspline_chordal_kernel on the calling thread only."""
+    _bspline_range(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out, 0, corners.shape[0])

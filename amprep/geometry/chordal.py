@@ -29,7 +29,7 @@ def load_kernels() -> None:
 
 
 def warm_kernels() -> None:
-    """load_kernels(), then one call of each kernel on a small cylinder and B-spline face, with the argument types
+    """load_kernels(), then calls of each kernel (serial and parallel) on a cylinder and a B-spline face with the types
     of real calls: numba's first dispatch (its typing registry, ~0.3 s) is paid here, e.g. while another process
     reads the file."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
@@ -53,7 +53,10 @@ def warm_kernels() -> None:
     uv = np.array([[[0.1, 0.1], [0.5, 0.1], [0.1, 0.5]]])
     for face in (cylinder, patch):
         surface = surface_of(face)
-        triangle_chordal_error(surface.evaluate(uv[0])[None], uv, surface)
+        corners = surface.evaluate(uv[0])[None]
+        for tris, points in ((1, 1), (_kernels.BLOCK + 1, _bspline.EVAL_BLOCK + 1)):  # serial, then parallel kernels
+            surface.evaluate(np.repeat(uv[0], points, axis=0))
+            triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
 
 
 def kernels_loaded() -> bool:
@@ -70,6 +73,28 @@ def barycentric_grid(order: int) -> np.ndarray:
     return w
 
 
+@lru_cache(maxsize=32)
+def _interior_first(order: int) -> np.ndarray:
+    """The order-k grid's points, those farthest from the triangle's sides first (where a curved surface leaves the
+    triangle's plane most): a triangle over a stop value is found with few points."""
+    w = barycentric_grid(order)
+    out = w[np.argsort(-w.min(axis=1), kind="stable")]
+    out.flags.writeable = False
+    return out
+
+
+def exact_over(err: np.ndarray, threshold: float, nodes: np.ndarray, uv: np.ndarray, tris: np.ndarray,
+               surface: Surface, order: int = 6) -> np.ndarray:
+    """err (t,) of triangles tris (t, 3) over nodes (n, 3) with (u,v) (n, 2), every value over the threshold measured
+    again without a stop, so that it is the true maximum."""
+    over = np.flatnonzero(err > threshold)
+    if len(over):
+        err = err.copy()
+        t = tris[over]
+        err[over] = triangle_chordal_error(nodes[t], uv[t], surface, order, affine=surface.affine)
+    return err
+
+
 def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     """(m,) max_i |S(u_i, v_i) − c_i| over the corners: the exact bound of ε_T when S is affine in (u,v) (a plane),
     since every S(Σ w_i uv_i) − (plane of T) = Σ w_i (S(uv_i) − c_i) · n̂."""
@@ -77,7 +102,8 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
     return np.linalg.norm(exact - corners, axis=2).max(axis=1)
 
 
-def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray) -> np.ndarray | None:
+def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray,
+              stop: float = np.inf) -> np.ndarray | None:
     """ε_T by the fused, threaded kernel of _chordal_kernel.py, or None where the surface has none (OCCT-evaluated
     kinds) or the call is too small to pay numba's start-up before the kernel is loaded (while the process's numpy
     work stays under bspline.NUMPY_BUDGET)."""
@@ -95,8 +121,10 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
     out = np.empty(len(corners))
     corners = np.ascontiguousarray(corners, dtype=np.float64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
+    serial = len(corners) <= _kernels.BLOCK
     if kind is not None:
-        _kernels.analytic_chordal_kernel(kind[0], kind[1], corners, uv, w, out)
+        fn = _kernels.analytic_chordal_serial if serial else _kernels.analytic_chordal_kernel
+        fn(kind[0], kind[1], corners, uv, w, float(stop), out)
     else:
         assert d is not None
         if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
@@ -104,20 +132,24 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
                                                             d["weights"][..., None]], axis=2))
         pw = d["_pw"]
         per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
-        _kernels.bspline_chordal_kernel(pw, np.ascontiguousarray(d["uknots"], dtype=np.float64),
+        fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
+        fn(pw, np.ascontiguousarray(d["uknots"], dtype=np.float64),
                                         np.ascontiguousarray(d["vknots"], dtype=np.float64), int(d["udeg"]),
-                                        int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w), out)
+                                        int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w),
+                                        float(stop), out)
     return out
 
 
 def triangle_chordal_error(
     corners: np.ndarray, uv: np.ndarray, surface: Surface | Callable[[np.ndarray], np.ndarray], order: int = 6,
-    affine: bool = False,
+    affine: bool = False, stop: float = np.inf,
 ) -> np.ndarray:
     """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v);
     corners (m, 3, 3) mm, uv (m, 3, 2) on `surface` (a Surface, or its evaluate: (N, 2) → (N, 3)). Zero-area: 0.
     affine=True (planes): the corner bound of affine_chordal_bound instead of sampling. A Surface with a closed
-    form or B-spline data is measured by the compiled kernel on large calls (same samples, same result)."""
+    form or B-spline data is measured by the compiled kernel on large calls (same samples, same result); it may
+    leave a triangle's points at the first over `stop` (interior points first): a value over `stop` is then only
+    a lower bound (exact_over makes such values exact)."""
     m = len(corners)
     if m == 0:
         return np.zeros(0)
@@ -126,7 +158,7 @@ def triangle_chordal_error(
         return affine_chordal_bound(corners, uv, evaluate)
     w = barycentric_grid(order)
     if isinstance(surface, Surface):
-        fast = _compiled(surface, corners, uv, w)
+        fast = _compiled(surface, corners, uv, _interior_first(order) if stop < np.inf else w, stop)
         if fast is not None:
             return fast
     normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])

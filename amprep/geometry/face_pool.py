@@ -26,6 +26,13 @@ def can_fork() -> bool:
     if "fork" not in mp.get_all_start_methods() or mp.current_process().daemon or cores() < 2:
         return False
     layer = os.environ.get("NUMBA_THREADING_LAYER", "workqueue")
+    if "numba" in sys.modules:  # the layer numba launched, or will launch
+        import numba
+
+        try:
+            layer = numba.threading_layer()
+        except ValueError:  # no parallel kernel ran yet
+            layer = numba.config.THREADING_LAYER if numba.config.THREADING_LAYER != "default" else layer
     return layer in ("workqueue", "tbb")
 
 

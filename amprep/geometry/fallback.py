@@ -11,7 +11,7 @@ from OCP.GCPnts import GCPnts_TangentialDeflection
 from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
-from .chordal import triangle_chordal_error
+from .chordal import exact_over, triangle_chordal_error
 from .errors import AmprepError, ErrorCode
 from .patch_refine import flip_flat_triangles, refine_patch
 from .surfaces import Surface
@@ -158,7 +158,8 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         pts = np.concatenate([pts, apart(np.unique(seeds * scale, axis=0), pts, MIN_SPACING * tolerance)])
     tris = triangulate_pslg(pts, segments, holes)
     xyz = surface.evaluate(pts / scale)
-    err = triangle_chordal_error(xyz[tris], (pts / scale)[tris], surface, order, affine=surface.affine)
+    err = triangle_chordal_error(xyz[tris], (pts / scale)[tris], surface, order, affine=surface.affine,
+                                 stop=tolerance)
     node_vertex = np.full(len(pts), -1, np.int64)
     node_edge = np.full(len(pts), -1, np.int64)
     node_param = np.full(len(pts), np.nan)
@@ -201,7 +202,8 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
         code = triangle_codes(tris, len(pts))
         seen, err = recall_errors(len(tris), code, known_code, known_err)
         fresh = ~seen
-        err[fresh] = triangle_chordal_error(xyz[tris[fresh]], uv[tris[fresh]], surface, order, affine=affine)
+        err[fresh] = triangle_chordal_error(xyz[tris[fresh]], uv[tris[fresh]], surface, order, affine=affine,
+                                            stop=tolerance)
         known_code, known_err = code, err
         bad = err > tolerance
         if not bad.any():
@@ -218,6 +220,6 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
         xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
     if final_err is None:  # rounds ran out after a last insertion: measure the triangles kept
         final_err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, affine=affine)
-    return pts, tris, xyz, final_err
+    return pts, tris, xyz, exact_over(final_err, tolerance, xyz, uv, tris, surface, order)
 
 

@@ -86,7 +86,7 @@ class Forked(Generic[T]):
             return value  # type: ignore[no-any-return]
         if kind == "amprep":
             raise AmprepError(ErrorCode(value[0]), value[1])
-        raise AmprepError(self._died[0], self._died[1])
+        raise AmprepError(self._died[0], f"{self._died[1]} ({value})")
 
     def _inline(self) -> tuple[str, Any]:
         return "ok", self._fn(*self._args)
@@ -97,9 +97,12 @@ class Forked(Generic[T]):
             while block := fh.read(1 << 20):
                 chunks.append(block)
         self._fd = -1
-        os.waitpid(self._pid, 0)
+        status = os.waitpid(self._pid, 0)[1]
+        if not chunks:
+            sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else 0
+            return "died", f"killed by signal {sig}" if sig else f"exit status {os.waitstatus_to_exitcode(status)}"
         try:
-            return pickle.loads(b"".join(chunks)) if chunks else ("died", "no result")  # type: ignore[no-any-return]
+            return pickle.loads(b"".join(chunks))  # type: ignore[no-any-return]
         except (pickle.UnpicklingError, EOFError):
             return "died", "a truncated result"
 

@@ -220,16 +220,25 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                 if len(after) != len(before):
                     topo.edge_params[ei] = after
                     todo |= _faces_of_edge(model, topo, ei)
+        mend = []
         for i in over:  # a face whose boundary stands is refined where it fails, the rest of its mesh kept
             if (i in todo or surfaces[i] is None or patches[i].uv is None  # type: ignore[union-attr]
                     or len(errors[i]) < LOCAL_MIN_TRIANGLES or np.mean(errors[i] > target) > LOCAL_MAX_BAD
                     or has_pole(model.faces[i])):
                 todo.add(i)
-                continue
+            else:
+                mend.append(i)
+
+        def mend_face(i: int, target: float = target) -> FacePatch | None:
             refined = refine_patch(patches[i], errors[i], surfaces[i], target, params.sample_order)  # type: ignore[arg-type]
             if refined is not None:
                 refined = flip_flat_triangles(refined, surfaces[i], target, params.sample_order, min_area)  # type: ignore[arg-type]
-            if refined is None or flat_triangles(refined, min_area).any():
+            return None if refined is None or flat_triangles(refined, min_area).any() else refined
+
+        cost = {i: _remesh_cost(patches[i], errors[i], target) for i in mend}
+        mend.sort(key=lambda i: (-cost[i], i))
+        for i, refined in map_faces(mend_face, mend, ready=kernels_loaded, cost=[cost[i] for i in mend]).items():
+            if refined is None:
                 todo.add(i)
             else:
                 patches[i], errors[i] = refined, refined.error  # type: ignore[assignment]

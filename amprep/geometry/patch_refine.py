@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .chordal import triangle_chordal_error
+from .chordal import exact_over, triangle_chordal_error
 from .errors import AmprepError
 from .surfaces import Surface
 from .tessellate import FacePatch
@@ -118,10 +118,11 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         seen, fresh_err = recall_errors(len(fresh), triangle_codes(fresh, len(pts)), triangle_codes(region, len(pts)),
                                         err[in_region])
         fresh_err[~seen] = triangle_chordal_error(xyz[fresh[~seen]], uv[fresh[~seen]], surface, order,
-                                                  affine=surface.affine)
+                                                  affine=surface.affine, stop=tolerance)
         tris = np.concatenate([tris[~in_region], fresh])
         err = np.concatenate([err[~in_region], fresh_err])
     k = len(pts) - len(patch.uv)
+    err = exact_over(err, tolerance, xyz, uv, tris, surface, order)
     return replace(patch, nodes=xyz, uv=uv, tris=tris,
                    node_vertex=np.concatenate([patch.node_vertex, np.full(k, -1, np.int64)]),
                    node_edge=np.concatenate([patch.node_edge, np.full(k, -1, np.int64)]),

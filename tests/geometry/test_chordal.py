@@ -56,9 +56,7 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
     models = ([model_from_shape(s) for s in reference_solids.values()] if source == "reference"
               else [read_cad(corpus(source))])
     w = barycentric_grid(6)
-    from amprep.geometry import _chordal_kernel
-
-    chordal._kernels = _chordal_kernel  # loaded: every call of any size takes the compiled path
+    chordal.load_kernels()  # loaded: every call of any size takes the compiled path
     kinds = set()
     for model in models:
         mesh = mesh_model(model, MeshParams(tolerance=0.2)).mesh
