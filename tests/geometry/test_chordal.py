@@ -80,3 +80,36 @@ def test_many_small_numpy_evaluations_add_up_to_loading_the_kernels(monkeypatch)
     monkeypatch.setattr(bspline, "NUMPY_BUDGET", 10)
     assert bspline.spend_numpy(4) and bspline.spend_numpy(5)
     assert not bspline.spend_numpy(1) and not bspline.spend_numpy(1)
+
+
+@pytest.mark.parametrize("name, tol", [("nist_ctc02_ap242.stp", 0.5), ("nist_ctc02_bspline_ap203.stp", 0.05)])
+def test_a_stop_value_bounds_only_triangles_over_it_and_serial_kernels_equal_parallel(name, tol):
+    """Every curved face of a real part, measured in one call (the parallel kernels, over BLOCK triangles) and in
+    calls of a few triangles (the serial kernels): the same values, bit for bit. With a stop at the median, values
+    at or under it are exact, values over it are over it and at most the true ones, and exact_over restores them."""
+    from amprep.geometry import _chordal_kernel, chordal
+    from amprep.geometry.cad import read_cad
+    from amprep.geometry.mesher import mesh_model
+    from amprep.geometry.tessellate import MeshParams
+    from tests.conftest import corpus
+
+    chordal.load_kernels()
+    model = read_cad(corpus(name))
+    mesh = mesh_model(model, MeshParams(tolerance=tol)).mesh
+    checked = 0
+    for surf, corners, uv in _faces_of(model, mesh):
+        if surf.surface_type not in ("cylinder", "cone", "sphere", "torus", "bspline") or len(corners) < 8:
+            continue
+        full = triangle_chordal_error(corners, uv, surf)
+        pieces = np.concatenate([triangle_chordal_error(corners[s:s + 7], uv[s:s + 7], surf)
+                                 for s in range(0, len(corners), 7)])
+        assert np.array_equal(full, pieces)
+        stop = float(np.median(full))
+        bounded = triangle_chordal_error(corners, uv, surf, stop=stop)
+        under = full <= stop
+        assert np.array_equal(bounded[under], full[under])
+        assert (bounded[~under] > stop).all() and (bounded[~under] <= full[~under]).all()
+        nodes, tris = corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3)
+        assert np.array_equal(chordal.exact_over(bounded, stop, nodes, uv.reshape(-1, 2), tris, surf), full)
+        checked += len(corners) > _chordal_kernel.BLOCK
+    assert checked, "no face large enough for the parallel kernel"
