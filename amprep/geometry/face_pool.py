@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from .errors import AmprepError, ErrorCode
-from .forked import Forked, cores
+from .forked import Forked, cores, fork_available
 
 #: work whose estimated cost (the caller's unit: mesher.py counts triangles) is under this runs serially
 PARALLEL_MIN_COST = 20_000
@@ -23,7 +23,7 @@ MAX_WORKERS = 4
 def can_fork() -> bool:
     """True when worker processes may be forked here: the fork start method exists, this is not a daemonic process
     (a Celery prefork child, whose parallelism is its siblings), and numba's threads (if loaded) survive a fork."""
-    if "fork" not in mp.get_all_start_methods() or mp.current_process().daemon or cores() < 2:
+    if not fork_available():
         return False
     layer = os.environ.get("NUMBA_THREADING_LAYER", "workqueue")
     if "numba" in sys.modules:  # the layer numba launched, or will launch

@@ -4,6 +4,7 @@ crash in a C library) becomes an error instead of taking the caller down. Inline
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import pickle
 import select
@@ -25,8 +26,9 @@ def cores() -> int:
 
 
 def fork_available() -> bool:
-    """True when os.fork exists and a second core can run the child."""
-    return hasattr(os, "fork") and cores() >= 2
+    """True when os.fork exists, a second core can run the child and this is not a daemonic process (a Celery
+    prefork child, whose parallelism is its siblings on the other cores)."""
+    return hasattr(os, "fork") and cores() >= 2 and not mp.current_process().daemon
 
 
 class Forked(Generic[T]):

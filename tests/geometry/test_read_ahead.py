@@ -99,3 +99,25 @@ def test_checks_beside_manifold3d_equal_the_checks_here():
     checks, rounded = output_checks(r.mesh)
     assert checks == r.checks and rounded == r.float32_degenerate
     assert r.checks.closed and r.manifold3d
+
+
+def _forked_in_child(queue):
+    from amprep.geometry.face_pool import can_fork
+    from amprep.geometry.forked import Forked
+
+    job = Forked(os.getpid)
+    queue.put((job.forked, job.result() == os.getpid(), can_fork()))
+
+
+@needs_fork
+def test_a_daemonic_process_does_its_work_itself():
+    """A Celery prefork child is daemonic: its siblings use the other cores, so nothing is forked there."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_forked_in_child, args=(queue,), daemon=True)
+    proc.start()
+    forked, same_process, pool = queue.get(timeout=60)
+    proc.join(60)
+    assert not forked and same_process and not pool
