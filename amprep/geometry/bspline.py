@@ -38,9 +38,7 @@ COMPILED_MIN_POINTS = 100_000
 #: numpy evaluation a process may do (points; B-spline points count 3× closed-form ones, being ~5× slower) before
 #: loading numba (0.5 s once) pays: many small calls add up once refinement drives them
 NUMPY_BUDGET = 1_500_000
-_kernel = None
-#: points per block of the parallel evaluation kernel (_bspline_kernel.EVAL_BLOCK, here without importing numba)
-EVAL_BLOCK = 4096
+_kernel = None  # (parallel kernel, serial kernel, points per parallel block) once loaded
 _numpy_work = 0
 _CHUNK = 65536
 
@@ -84,10 +82,8 @@ def load_kernel() -> None:
     """Import numba and the compiled B-spline kernel (~0.7 s once per process; cached machine code after)."""
     global _kernel
     fork_safe_threads()
-    from ._bspline_kernel import EVAL_BLOCK as block
-    from ._bspline_kernel import eval_surface_kernel, eval_surface_serial
+    from ._bspline_kernel import EVAL_BLOCK, eval_surface_kernel, eval_surface_serial
 
-    assert block == EVAL_BLOCK
     _kernel = (eval_surface_kernel, eval_surface_serial, EVAL_BLOCK)
 
 
@@ -114,7 +110,8 @@ def eval_surface(
     assert _kernel is not None
     out = np.empty((len(uv), 3))
     parallel, serial, block = _kernel
-    (serial if len(uv) <= block else parallel)(pw, np.ascontiguousarray(uknots, dtype=np.float64), np.ascontiguousarray(vknots, dtype=np.float64),
-            int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
+    run = serial if len(uv) <= block else parallel
+    run(pw, np.ascontiguousarray(uknots, dtype=np.float64), np.ascontiguousarray(vknots, dtype=np.float64),
+        int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
     return out
 

@@ -44,6 +44,8 @@ def warm_kernels() -> None:
     from .surfaces import surface_of
 
     load_kernels()
+    from ._bspline_kernel import EVAL_BLOCK
+
     grid = TColgp_Array2OfPnt(1, 4, 1, 4)
     for i in range(1, 5):
         for j in range(1, 5):
@@ -54,7 +56,7 @@ def warm_kernels() -> None:
     for face in (cylinder, patch):
         surface = surface_of(face)
         corners = surface.evaluate(uv[0])[None]
-        for tris, points in ((1, 1), (_kernels.BLOCK + 1, _bspline.EVAL_BLOCK + 1)):  # serial, then parallel kernels
+        for tris, points in ((1, 1), (_kernels.BLOCK + 1, EVAL_BLOCK + 1)):  # serial, then parallel kernels
             surface.evaluate(np.repeat(uv[0], points, axis=0))
             triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
 
@@ -133,10 +135,8 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
         pw = d["_pw"]
         per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
         fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
-        fn(pw, np.ascontiguousarray(d["uknots"], dtype=np.float64),
-                                        np.ascontiguousarray(d["vknots"], dtype=np.float64), int(d["udeg"]),
-                                        int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w),
-                                        float(stop), out)
+        fn(pw, np.ascontiguousarray(d["uknots"], dtype=np.float64), np.ascontiguousarray(d["vknots"], dtype=np.float64),
+           int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w), float(stop), out)
     return out
 
 

@@ -115,15 +115,18 @@ class Forked(Generic[T]):
                 os.kill(self._pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-            os.close(self._fd)
-            self._fd = -1
-            os.waitpid(self._pid, 0)
+            self._reap()
             self._value = ("died", "killed")
 
-    def __del__(self) -> None:  # a caller that never asked: do not leave a zombie
+    def _reap(self) -> None:
+        """Close the pipe of a child whose result was never read and wait for it (no zombie left)."""
         if self._pid > 0 and self._fd >= 0:
             try:
                 os.close(self._fd)
                 os.waitpid(self._pid, 0)
             except OSError:
                 pass
+            self._fd = -1
+
+    def __del__(self) -> None:  # a caller that never asked
+        self._reap()

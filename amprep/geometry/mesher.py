@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +101,13 @@ def absolute_tolerance(model: CadModel, params: MeshParams) -> float:
     return params.relative * diag
 
 
+def brepmesh_model(model: CadModel, params: MeshParams) -> float:
+    """The model's absolute tolerance, after run_brepmesh meshed its shape at it."""
+    tol = absolute_tolerance(model, params)
+    run_brepmesh(model.shape, tol, params)
+    return tol
+
+
 def patch_error(patch: FacePatch, surface: Surface | None, order: int) -> np.ndarray:
     """(t,) chordal error of each triangle of a patch (nan when the face has no surface or no (u,v))."""
     if surface is None or patch.uv is None or patch.meshed_by == "stored":
@@ -119,10 +126,8 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     run_brepmesh already meshed the shape at with these params (read_ahead.py), so it is not run again."""
     params.validate()
     prog = Progress(progress)
-    tol = absolute_tolerance(model, params) if meshed_at is None else meshed_at
     prog("meshing", 0.0)
-    if meshed_at is None:
-        run_brepmesh(model.shape, tol, params)
+    tol = brepmesh_model(model, params) if meshed_at is None else meshed_at
     prog("meshing", 0.4)
     topo = Topology.of(model.shape)
     n_faces = len(model.faces)
@@ -185,11 +190,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
             except AmprepError:
                 return None
 
-        cost = {i: _remesh_cost(patches[i], errors[i], tol * ENFORCE_MARGIN) for i in remesh}
-        # in parallel only once the compiled kernels run every chordal measure (numpy's floats differ in the last
-        # bits, and which faces a process would measure in numpy depends on timing): the result stays deterministic
-        order_ = sorted(remesh, key=lambda i: (-cost[i], i))
-        for i, patch in map_faces(remesh_face, order_, ready=kernels_loaded, cost=[cost[i] for i in order_]).items():
+        for i, patch in _costliest_first(remesh_face, remesh, patches, errors, tol * ENFORCE_MARGIN).items():
             patches[i] = patch
             if patch is None:
                 unmeshed.append(i)
@@ -235,9 +236,7 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                 refined = flip_flat_triangles(refined, surfaces[i], target, params.sample_order, min_area)  # type: ignore[arg-type]
             return None if refined is None or flat_triangles(refined, min_area).any() else refined
 
-        cost = {i: _remesh_cost(patches[i], errors[i], target) for i in mend}
-        mend.sort(key=lambda i: (-cost[i], i))
-        for i, refined in map_faces(mend_face, mend, ready=kernels_loaded, cost=[cost[i] for i in mend]).items():
+        for i, refined in _costliest_first(mend_face, mend, patches, errors, target).items():
             if refined is None:
                 todo.add(i)
             else:
@@ -255,6 +254,16 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, fallback, tuple(sorted(set(unmeshed))))
+
+
+def _costliest_first(fn: Callable[[int], FacePatch | None], faces: list[int], patches: list[FacePatch | None],
+                     errors: list[np.ndarray], target: float) -> dict[int, FacePatch | None]:
+    """{i: fn(i)} for the faces, through face_pool.map_faces, costliest first by _remesh_cost. In parallel only once
+    the compiled kernels run every chordal measure (numpy's floats differ in the last bits, and which faces a process
+    would measure in numpy depends on timing): the result stays deterministic."""
+    cost = {i: _remesh_cost(patches[i], errors[i], target) for i in faces}
+    order = sorted(faces, key=lambda i: (-cost[i], i))
+    return map_faces(fn, order, ready=kernels_loaded, cost=[cost[i] for i in order])
 
 
 def _remesh_cost(patch: FacePatch | None, error: np.ndarray, target: float) -> float:

@@ -16,8 +16,8 @@ from .cad import CadModel, model_from_shape, read_cad
 from .chordal import kernels_loaded, warm_kernels
 from .errors import AmprepError, ErrorCode
 from .forked import Forked
-from .mesher import absolute_tolerance
-from .tessellate import MeshParams, occt_pool_untouched, run_brepmesh
+from .mesher import brepmesh_model
+from .tessellate import MeshParams, occt_pool_untouched
 
 #: kernels are warmed only when the child has not finished within this many seconds: a file that reads and meshes
 #: faster is small, and may never need them
@@ -27,9 +27,7 @@ WARM_AFTER = 0.15
 def read_and_mesh(path: str | Path, fmt: str, params: MeshParams) -> tuple[CadModel, float]:
     """(model, absolute tolerance) of a CAD file, read and meshed by run_brepmesh in this process."""
     model = read_cad(path, fmt)
-    tol = absolute_tolerance(model, params)
-    run_brepmesh(model.shape, tol, params)
-    return model, tol
+    return model, brepmesh_model(model, params)
 
 
 def _child(path: str, fmt: str, params: MeshParams) -> tuple[bytes, str, bool, float]:
