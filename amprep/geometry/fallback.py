@@ -26,6 +26,7 @@ from .uv_cdt import (
     triangle_codes,
     triangulate_pslg,
 )
+from .uv_seed import curvature_seeds
 
 
 def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
@@ -37,7 +38,19 @@ def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.n
     disc = GCPnts_TangentialDeflection(curve, angular, tolerance, 3)
     params = np.array([disc.Parameter(i) for i in range(1, disc.NbPoints() + 1)])
     params = np.unique(np.clip(np.concatenate([[first, last], params]), first, last))
-    return params
+    # GCPnts may return a parameter a hair from an end (seen: 2e-6 mm on CTC-02): a segment that short makes a
+    # needle with any third point; drop interior points nearer than MIN_SPACING × tolerance to the point before
+    # them or to the end
+    pts = np.array([curve.Value(t).Coord() for t in params])
+    eps = MIN_SPACING * tolerance
+    keep = np.ones(len(params), bool)
+    last_kept = pts[0]
+    for i in range(1, len(params) - 1):
+        if np.linalg.norm(pts[i] - last_kept) <= eps or np.linalg.norm(pts[-1] - pts[i]) <= eps:
+            keep[i] = False
+        else:
+            last_kept = pts[i]
+    return params[keep]
 
 
 def edge_sagitta(edge: TopoDS_Edge, params: np.ndarray) -> np.ndarray:
@@ -129,17 +142,29 @@ def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
 
 
 def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
-              angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0) -> FacePatch:
-    """A FacePatch for one face: CDT of its boundary loops in scaled (u,v) (plus `seeds` (k, 2) interior (u,v)
-    points, e.g. an earlier mesh's), points inserted (longest inner edge midpoint, else centroid) in every
-    triangle whose chordal error exceeds the tolerance, until none does; then flat triangles (area ≤ min_area, or
-    needles) flipped away where a flip keeps the tolerance (patch_refine.flip_flat_triangles)."""
+              angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0,
+              curvature_sized: bool = True) -> FacePatch:
+    """A FacePatch for one face: CDT of its boundary loops in scaled (u,v) plus interior points (when
+    `curvature_sized`, on a curved surface with a numpy evaluator and no pole, uv_seed.curvature_seeds' points in
+    their stretched space; else `seeds` (k, 2) interior (u,v) points, e.g. an earlier mesh's), points inserted
+    (longest inner edge midpoint, else centroid) in every triangle whose chordal error exceeds the tolerance, until
+    none does; then flat triangles (area ≤ min_area, or needles) flipped away where a flip keeps the tolerance
+    (patch_refine.flip_flat_triangles)."""
     loops = boundary_loops(face, topo, tolerance, angular)
     if not loops:
         raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
     b_uv = np.concatenate([lp["uv"] for lp in loops])
     nb = len(b_uv)
     scale = metric_scale(surface, b_uv)
+    spacing = MIN_SPACING * tolerance  # in the triangulation space: ≈ mm in metric-scaled (u,v)
+    # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
+    # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
+    if curvature_sized and not surface.affine and surface.exact_numpy and not has_pole(face):
+        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, scale)
+        if seeded is not None:
+            seeds, stretched = seeded
+            spacing *= float(np.max(stretched / scale))
+            scale = stretched
     seg, start = [], 0
     for lp in loops:
         n = len(lp["uv"])
@@ -154,9 +179,15 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     holes = cent[~_inside(cent, scaled_loops)]
     if seeds is not None and len(seeds):
         # no inside test needed: a seed outside the boundary polygon lies in a hole or concavity that Triangle
-        # eats, so it is left unused
-        pts = np.concatenate([pts, apart(np.unique(seeds * scale, axis=0), pts, MIN_SPACING * tolerance)])
+        # eats; such seeds are dropped after
+        pts = np.concatenate([pts, apart(np.unique(seeds * scale, axis=0), pts, spacing)])
     tris = triangulate_pslg(pts, segments, holes)
+    used = np.zeros(len(pts), bool)
+    used[:nb] = True
+    used[tris] = True
+    if not used.all():
+        tris = (np.cumsum(used) - 1)[tris]
+        pts = pts[used]
     xyz = surface.evaluate(pts / scale)
     err = triangle_chordal_error(xyz[tris], (pts / scale)[tris], surface, order, affine=surface.affine,
                                  stop=tolerance)
@@ -173,10 +204,10 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     if (err > tolerance).any():
         # insertions re-triangulate only around them, except at a pole or apex (there a line of (u,v) is one point
         # and a local re-triangulation leaves tilted triangles in the fan)
-        refined = None if has_pole(face) else refine_patch(patch, err, surface, tolerance, order)
+        refined = None if has_pole(face) else refine_patch(patch, err, surface, tolerance, order, scale=scale)
         if refined is None:
             pts, tris, xyz, err = _refine_globally(pts, tris, err, segments, holes, scale, xyz, surface, tolerance,
-                                                   order)
+                                                   order, spacing)
             k = len(pts) - len(node_vertex)
             refined = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris,
                                 np.concatenate([node_vertex, np.full(k, -1, np.int64)]),
@@ -188,10 +219,10 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
 
 def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segments: np.ndarray, holes: np.ndarray,
                      scale: np.ndarray, xyz: np.ndarray, surface: Surface, tolerance: float,
-                     order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The robust path when a local re-triangulation cannot be made: points inserted in every triangle over the
-    tolerance and the whole face triangulated again, until none is over (`err` (t,): the error of the first `tris`);
-    returns (pts, tris, xyz, error)."""
+                     order: int, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The robust path when a local re-triangulation cannot be made: points inserted (no nearer than `spacing` to
+    another, in the space of pts = uv · scale) in every triangle over the tolerance and the whole face triangulated
+    again, until none is over (`err` (t,): the error of the first `tris`); returns (pts, tris, xyz, error)."""
     affine = surface.affine
     final_err = None
     known_code, known_err = triangle_codes(tris, len(pts)), err
@@ -210,7 +241,7 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
             final_err = err
             break
         seg_code = np.sort(segments.min(axis=1) * (len(pts) + 1) + segments.max(axis=1))
-        new = apart(insertion_points(pts, tris[bad], seg_code, len(pts) + 1), pts, MIN_SPACING * tolerance)
+        new = apart(insertion_points(pts, tris[bad], seg_code, len(pts) + 1), pts, spacing)
         if not len(new):
             break
         pts = np.concatenate([pts, new])

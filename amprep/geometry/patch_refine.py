@@ -68,14 +68,19 @@ def _retriangulate(pts: np.ndarray, region: np.ndarray, outside_seeds: np.ndarra
 
 
 def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, tolerance: float, order: int = 6,
-                 rounds: int = MAX_ROUNDS) -> FacePatch | None:
+                 rounds: int = MAX_ROUNDS, scale: np.ndarray | None = None) -> FacePatch | None:
     """The patch with every triangle whose chordal error `error` (t,) exceeds the tolerance replaced, with the
     triangles sharing a node with it, by a CDT of that region plus one point per such triangle (midpoint of its
     longest inner edge, else centroid), until none exceeds it; boundary nodes and all other triangles are kept
-    (`error` of the result is set). None when a region cannot be re-triangulated (a fold in the face's (u,v))."""
+    (`error` of the result is set). None when a region cannot be re-triangulated (a fold in the face's (u,v)).
+    Regions are re-triangulated in (u,v) · `scale` (2,), the space the patch was triangulated in (default:
+    metric_scale's, where OCCT's meshes are near-Delaunay); elsewhere a region's re-triangulation flips its
+    neighbours' diagonals and the bad triangles move instead of going."""
     assert patch.uv is not None
     tris, err = patch.tris, np.asarray(error, float)
-    scale = metric_scale(surface, patch.uv)
+    length_scale = metric_scale(surface, patch.uv)
+    scale = length_scale if scale is None else np.asarray(scale, float)
+    spacing = MIN_SPACING * tolerance * float(np.max(scale / length_scale))  # no nearer than that in mm
     pts = patch.uv * scale
     xyz, uv = patch.nodes, patch.uv
     sign = 1.0 if _signed_area2(pts, tris).sum() >= 0 else -1.0
@@ -92,7 +97,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         in_region = marked[tris].any(axis=1)
         region = tris[in_region]
         new = insertion_points(pts, tris[bad], boundary, base)
-        new = apart(new, pts[np.unique(region)], MIN_SPACING * tolerance)
+        new = apart(new, pts[np.unique(region)], spacing)
         if not len(new):
             break
         # a hole seed in every kept triangle across an inner edge of the region's border: Triangle must not fill

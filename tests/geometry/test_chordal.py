@@ -82,7 +82,7 @@ def test_many_small_numpy_evaluations_add_up_to_loading_the_kernels(monkeypatch)
     assert not bspline.spend_numpy(1) and not bspline.spend_numpy(1)
 
 
-@pytest.mark.parametrize("name, tol", [("nist_ctc02_ap242.stp", 0.5), ("nist_ctc02_bspline_ap203.stp", 0.05)])
+@pytest.mark.parametrize("name, tol", [("nist_ctc02_ap242.stp", 0.1), ("nist_ctc02_bspline_ap203.stp", 0.05)])
 def test_a_stop_value_bounds_only_triangles_over_it_and_serial_kernels_equal_parallel(name, tol):
     """Every curved face of a real part, measured in one call (the parallel kernels, over BLOCK triangles) and in
     calls of a few triangles (the serial kernels): the same values, bit for bit. With a stop at the median, values

@@ -243,26 +243,38 @@ def test_circles_next_to_other_surfaces_keep_occts_discretisation(reference_soli
     assert np.array_equal(per_edge(res.mesh), per_edge(occt.mesh)) and res.mesh.n_triangles == occt.mesh.n_triangles
 
 
-def test_a_coarsening_that_would_add_triangles_is_reverted():
-    """On NIST CTC-02 at 0.01 mm the cylinder faces 44 and 48 re-meshed from coarsened circles would need ~7,100
-    triangles each against OCCT's 478 (their (u,v) strips do not line up): face 44's group gets OCCT's edges and
-    meshes back, face 48's is not coarsened at all (its saving is under COARSEN_MIN_GAIN), the others keep the gain,
-    so the part never has more triangles than with OCCT's circles."""
+def test_coarsened_circles_cost_no_triangles_and_a_coarsening_that_would_add_some_is_reverted(monkeypatch):
+    """On NIST CTC-02 at 0.01 mm the cylinders re-meshed from coarsened circles (curvature-sized points, in their
+    stretched (u,v)) have fewer triangles than OCCT's: face 44 412 against 478; face 48 is not coarsened at all (its
+    saving is under COARSEN_MIN_GAIN). Forced: re-meshed from OCCT's interior nodes instead (their (u,v) strips do
+    not line up: ~7,100 triangles each, as before the curvature sizing), face 44's group gets OCCT's edges and
+    meshes back, so the part never has more triangles than with OCCT's circles."""
+    from amprep.geometry import mesher
+
     model = read_cad(corpus("nist_ctc02_ap242.stp"))
     occt = mesh_model(model, MeshParams(tolerance=0.01, coarsen_circles=False))
-    res = mesh_model(model, MeshParams(tolerance=0.01))
     n_occt = np.bincount(occt.mesh.face_ids, minlength=len(model.faces))
-    n_res = np.bincount(res.mesh.face_ids, minlength=len(model.faces))
-    assert n_res[44] == n_occt[44] and n_res[48] == n_occt[48]
-    assert 44 not in res.fallback_faces and 48 not in res.fallback_faces
-    assert "coarsened" in res.fallback_faces.values() and res.mesh.n_triangles < occt.mesh.n_triangles
-    c = check_mesh(res.mesh)
-    assert c.closed and c.degenerate_triangles == 0 and res.max_error <= 0.01
+
+    def check(res):
+        c = check_mesh(res.mesh)
+        assert c.closed and c.degenerate_triangles == 0 and res.max_error <= 0.01
+        assert "coarsened" in res.fallback_faces.values()
+        return np.bincount(res.mesh.face_ids, minlength=len(model.faces))
+
+    res = mesh_model(model, MeshParams(tolerance=0.01))
+    n_res = check(res)
+    assert res.fallback_faces.get(44) == "coarsened" and n_res[44] <= n_occt[44]
+    assert 48 not in res.fallback_faces and n_res[48] == n_occt[48] and res.mesh.n_triangles < occt.mesh.n_triangles
+    real = mesher.mesh_face
+    monkeypatch.setattr(mesher, "mesh_face", lambda *a, **k: real(*a, **k, curvature_sized=False))
+    forced = mesh_model(model, MeshParams(tolerance=0.01))
+    n_forced = check(forced)
+    assert n_forced[44] == n_occt[44] and 44 not in forced.fallback_faces
 
 
 def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
-    """CTC-02's face 174 at 0.001 mm, re-meshed from OCCT's interior nodes: insertion once put two nodes 3.2e-6 mm
-    apart (one vertex after float32 rounding in the STL: degenerate triangles, non-manifold edges). Inserted and
+    """CTC-02's face 174 at 0.001 mm, re-meshed from OCCT's interior nodes (not the curvature-sized points, which
+    this face, curved one way, does without): insertion once put two nodes 3.2e-6 mm apart (one vertex after float32 rounding in the STL: degenerate triangles, non-manifold edges). Inserted and
     seeded points now keep MIN_SPACING × tolerance from every other node."""
     from scipy.spatial import cKDTree
 
@@ -279,7 +291,7 @@ def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     face = model.faces[174]
     occt = extract_patch(174, face, topo)
     seeds = occt.uv[(occt.node_edge < 0) & (occt.node_vertex < 0)]
-    patch = fallback.mesh_face(174, face, topo, surface_of(face), 0.00098, 0.5, seeds=seeds)
+    patch = fallback.mesh_face(174, face, topo, surface_of(face), 0.00098, 0.5, seeds=seeds, curvature_sized=False)
     inner = (patch.node_edge < 0) & (patch.node_vertex < 0)
     spacing = cKDTree(patch.nodes).query(patch.nodes[inner], k=2)[0][:, 1]
     assert spacing.min() > 0.5 * uv_cdt.MIN_SPACING * 0.001

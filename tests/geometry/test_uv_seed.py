@@ -1,0 +1,115 @@
+"""Curvature-sized interior points for meshing a face from scratch (uv_seed) and the fallback mesher that uses them."""
+
+import numpy as np
+import pytest
+
+from amprep.geometry import fallback, uv_seed
+from amprep.geometry.cad import read_cad
+from amprep.geometry.surfaces import Surface, cylinder, surface_of, torus
+from amprep.geometry.tessellate import MeshParams, Topology, extract_patch, run_brepmesh
+from amprep.geometry.uv_cdt import metric_scale
+from tests.conftest import corpus
+
+ORIGIN, X, Y, Z = np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
+
+
+def test_second_form_of_a_cylinder_and_a_torus():
+    """Cylinder r=10: |L| = r, M = N = 0. Torus R=20, r=5 at v (tube angle): |L| = (R + r cos v) cos v, N = r."""
+    cyl = Surface("cylinder", cylinder(ORIGIN, X, Y, Z, 10.0))
+    uv = np.array([[0.3, 2.0], [4.0, -7.0]])
+    L, M, N = uv_seed.second_form(cyl, uv, np.array([1e-4, 1e-4]))
+    assert np.allclose(np.abs(L), 10, rtol=1e-5) and np.allclose(M, 0, atol=1e-5) and np.allclose(N, 0, atol=1e-5)
+    tor = Surface("torus", torus(ORIGIN, X, Y, Z, 20.0, 5.0))
+    v = np.array([0.0, 1.0, 2.5])
+    L, M, N = uv_seed.second_form(tor, np.stack([np.full(3, 0.7), v], axis=1), np.array([1e-4, 1e-4]))
+    assert np.allclose(np.abs(L), np.abs((20 + 5 * np.cos(v)) * np.cos(v)), rtol=1e-5)
+    assert np.allclose(M, 0, atol=1e-4) and np.allclose(np.abs(N), 5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("target", [0.1, 0.01, 0.001])
+def test_cells_of_a_cylinder_are_as_wide_as_the_chord_allows_and_uncut_along_the_axis(target):
+    """|L| a²/8 ≤ target around the cylinder (a the cells' angle), within SLACK of a whole number of parts; the
+    straight direction is never cut (N = 0)."""
+    cyl = Surface("cylinder", cylinder(ORIGIN, X, Y, Z, 10.0))
+    box = np.array([[0.0, 0.0], [2 * np.pi, 30.0]])
+    centers, sizes = uv_seed.size_cells(cyl, box, target)
+    assert np.allclose(sizes[:, 1], 30.0)
+    allowed = np.sqrt(8 * target / 10.0)
+    parts = 2 * np.pi / sizes[:, 0]
+    assert np.allclose(parts, np.round(parts)) and (sizes[:, 0] <= allowed * (1 + uv_seed.SLACK / parts) + 1e-12).all()
+    needed = 2 * np.pi / allowed
+    assert (parts <= 1.1 * needed + 2).all()  # not much finer than the chord needs
+    assert np.isclose(sizes.prod(axis=1).sum(), 2 * np.pi * 30.0)  # the cells tile the box
+
+
+@pytest.fixture(scope="module")
+def ctc02_face35():
+    """CTC-02's large periodic B-spline face 35 at 0.01 mm: OCCT leaves 15 interior nodes in it and misses the
+    tolerance; re-meshed from those it took nine refinement rounds and ~70k triangles."""
+    model = read_cad(corpus("nist_ctc02_ap242.stp"))
+    run_brepmesh(model.shape, 0.01, MeshParams(tolerance=0.01))
+    topo = Topology.of(model.shape)
+    face = model.faces[35]
+    return face, topo, surface_of(face)
+
+
+def test_curvature_seeds_mesh_a_large_bspline_face_close_to_the_tolerance_at_once(ctc02_face35, monkeypatch):
+    face, topo, surface = ctc02_face35
+    tol = 0.0098
+    loops = fallback.boundary_loops(face, topo, tol, 0.5)
+    uv_loops = [lp["uv"] for lp in loops]
+    scale = metric_scale(surface, np.concatenate(uv_loops))
+    seeds, stretched = uv_seed.curvature_seeds(surface, uv_loops, tol, scale)
+    assert 1000 < len(seeds) < 20000 and not np.allclose(stretched, scale)
+    assert fallback._inside(seeds * scale, [u * scale for u in uv_loops]).mean() > 0.95
+    first = []
+    real = fallback.refine_patch
+
+    def spy(patch, error, *args, **kwargs):
+        first.append(np.asarray(error))
+        return real(patch, error, *args, **kwargs)
+
+    monkeypatch.setattr(fallback, "refine_patch", spy)
+    patch = fallback.mesh_face(35, face, topo, surface, tol, 0.5)
+    assert patch.error.max() <= tol
+    assert len(first) == 1 and (first[0] > tol).mean() < 0.35  # cells within SLACK of the target: a few over
+    assert len(patch.tris) < 1.5 * len(first[0])  # which refinement mends with a touch
+    occt = extract_patch(35, face, topo)
+    old_seeds = occt.uv[(occt.node_edge < 0) & (occt.node_vertex < 0)]  # what the re-mesh started from before
+    greedy = fallback.mesh_face(35, face, topo, surface, tol, 0.5, seeds=old_seeds, curvature_sized=False)
+    assert greedy.error.max() <= tol
+    assert len(patch.tris) < 0.5 * len(greedy.tris)  # insertion one point per bad triangle over-refines
+
+
+def test_refining_in_the_space_the_mesh_was_made_in_converges(ctc02_face35):
+    """A curvature-seeded mesh is Delaunay in its stretched (u,v), not in the metric one: re-triangulating regions
+    in the metric space flips the neighbours' diagonals and the bad triangles moved along the face for 40 rounds;
+    in its own space insertions finish it with a third of the triangles."""
+    from amprep.geometry.chordal import triangle_chordal_error
+    from amprep.geometry.patch_refine import refine_patch
+    from amprep.geometry.tessellate import FacePatch
+    from amprep.geometry.uv_cdt import triangulate_pslg
+
+    face, topo, surface = ctc02_face35
+    tol = 0.0098
+    loops = fallback.boundary_loops(face, topo, tol, 0.5)
+    uv_loops = [lp["uv"] for lp in loops]
+    b_uv = np.concatenate(uv_loops)
+    seeds, scale = uv_seed.curvature_seeds(surface, uv_loops, 1.3 * tol, metric_scale(surface, b_uv))
+    nb = len(b_uv)
+    seg = np.stack([np.arange(nb), np.roll(np.arange(nb), -1)], axis=1)  # face 35 has one wire
+    assert len(loops) == 1
+    uv = np.concatenate([b_uv, seeds])
+    tris = triangulate_pslg(uv * scale, seg)
+    tris = tris[fallback._inside((uv * scale)[tris].mean(axis=1), [b_uv * scale])]
+    xyz = surface.evaluate(uv)
+    err = triangle_chordal_error(xyz[tris], uv[tris], surface, 6)
+    assert (err > tol).sum() > 100  # seeded for 1.3× the tolerance: work to do
+    node = np.full(len(uv), -1)
+    node_edge = np.where(np.arange(len(uv)) < nb, 0, -1)
+    patch = FacePatch(35, xyz, uv, tris, node, node_edge, np.full(len(uv), np.nan), "fallback", err)
+    done = refine_patch(patch, err, surface, tol, 6, scale=scale)
+    assert done is not None and done.error.max() <= tol
+    assert len(done.tris) < 3 * len(tris)
+    metric = refine_patch(patch, err, surface, tol, 6)  # the same, re-triangulating in metric-scaled (u,v)
+    assert metric is None or len(metric.tris) > 1.5 * len(done.tris)  # measured: 55k triangles against 18k
