@@ -22,6 +22,7 @@ from .uv_cdt import (
     apart,
     insertion_points,
     metric_scale,
+    min_spacing,
     recall_errors,
     triangle_codes,
     triangulate_pslg,
@@ -155,16 +156,15 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
     b_uv = np.concatenate([lp["uv"] for lp in loops])
     nb = len(b_uv)
-    scale = metric_scale(surface, b_uv)
-    spacing = MIN_SPACING * tolerance  # in the triangulation space: ≈ mm in metric-scaled (u,v)
+    length_scale = scale = metric_scale(surface, b_uv)
+    pole = has_pole(face)
     # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
     # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
-    if curvature_sized and not surface.affine and surface.exact_numpy and not has_pole(face):
-        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, scale)
+    if curvature_sized and not surface.affine and surface.exact_numpy and not pole:
+        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale)
         if seeded is not None:
-            seeds, stretched = seeded
-            spacing *= float(np.max(stretched / scale))
-            scale = stretched
+            seeds, scale = seeded
+    spacing = min_spacing(tolerance, scale, length_scale)
     seg, start = [], 0
     for lp in loops:
         n = len(lp["uv"])
@@ -204,7 +204,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     if (err > tolerance).any():
         # insertions re-triangulate only around them, except at a pole or apex (there a line of (u,v) is one point
         # and a local re-triangulation leaves tilted triangles in the fan)
-        refined = None if has_pole(face) else refine_patch(patch, err, surface, tolerance, order, scale=scale)
+        refined = None if pole else refine_patch(patch, err, surface, tolerance, order, scale=scale)
         if refined is None:
             pts, tris, xyz, err = _refine_globally(pts, tris, err, segments, holes, scale, xyz, surface, tolerance,
                                                    order, spacing)

@@ -15,11 +15,11 @@ from .surfaces import Surface
 from .tessellate import FacePatch
 from .uv_cdt import (
     MAX_ROUNDS,
-    MIN_SPACING,
     apart,
     in_sorted,
     insertion_points,
     metric_scale,
+    min_spacing,
     recall_errors,
     triangle_codes,
     triangulate_pslg,
@@ -80,7 +80,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     tris, err = patch.tris, np.asarray(error, float)
     length_scale = metric_scale(surface, patch.uv)
     scale = length_scale if scale is None else np.asarray(scale, float)
-    spacing = MIN_SPACING * tolerance * float(np.max(scale / length_scale))  # no nearer than that in mm
+    spacing = min_spacing(tolerance, scale, length_scale)
     pts = patch.uv * scale
     xyz, uv = patch.nodes, patch.uv
     sign = 1.0 if _signed_area2(pts, tris).sum() >= 0 else -1.0

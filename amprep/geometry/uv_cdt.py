@@ -26,6 +26,12 @@ def metric_scale(surface: Surface, uv: np.ndarray) -> np.ndarray:
     return np.where(s > 1e-12, s, 1.0)
 
 
+def min_spacing(tolerance: float, scale: np.ndarray, length_scale: np.ndarray) -> float:
+    """MIN_SPACING × tolerance in mm, as a distance in (u,v) · scale (2,) that keeps points at least that far apart
+    in the metric-scaled (u,v) · length_scale (2,) (≈ mm)."""
+    return MIN_SPACING * tolerance * float(np.max(np.asarray(scale) / length_scale))
+
+
 def triangulate_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None = None) -> np.ndarray:
     """(t, 3) constrained Delaunay triangles of points (n, 2) and segments (s, 2), nothing added on a segment, the
     parts holding a hole point (h, 2) and outside the segments removed. Triangle crashes the process on two equal

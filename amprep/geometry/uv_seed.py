@@ -47,11 +47,15 @@ def second_form(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.
     return tuple(np.nan_to_num(np.einsum("ij,ij->i", normal, s)) for s in (s_uu, s_uv, s_vv))  # type: ignore[return-value]
 
 
+def _ranks(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(owner, rank) each (Σ counts,): item i of `counts` (n,) repeated counts[i] times, and 0 … counts[i] − 1."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    return owner, np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+
+
 def split_cells(centers: np.ndarray, sizes: np.ndarray, ku: np.ndarray, kv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cells (centers (n, 2), sizes (n, 2)) each cut into ku × kv (n,) equal cells: (centers, sizes) (Σ ku·kv, 2)."""
-    n = ku * kv
-    parent = np.repeat(np.arange(len(centers)), n)
-    j = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+    parent, j = _ranks(ku * kv)
     k = np.stack([ku[parent], kv[parent]], axis=1)
     child = sizes[parent] / k
     index = np.stack([j % k[:, 0], j // k[:, 0]], axis=1)
@@ -107,8 +111,8 @@ def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarra
     for a in loops:
         b = np.roll(a, -1, axis=0)
         k = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / spacing).astype(np.int64), 1)
-        seg = np.repeat(np.arange(len(a)), k)
-        t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / k[seg]
+        seg, j = _ranks(k)
+        t = j / k[seg]
         samples.append(a[seg] + t[:, None] * (b - a)[seg])
     distance = cKDTree(np.concatenate(samples)).query(points)[0]
     return distance > KEEP_OFF * shorter + spacing
