@@ -19,6 +19,7 @@ from .errors import AmprepError, ErrorCode
 from .face_pool import map_faces
 from .fallback import discretize_missing_edges, has_pole, mesh_face, split_edge_to_tolerance
 from .mesh import FaceInfo, Mesh
+from .own_faces import faces_to_mesh_ourselves
 from .patch_refine import flat_triangles, flip_flat_triangles, refine_patch
 from .progress import Progress, ProgressFn
 from .surfaces import Surface, surface_of
@@ -101,10 +102,21 @@ def absolute_tolerance(model: CadModel, params: MeshParams) -> float:
     return params.relative * diag
 
 
+def own_faces(model: CadModel, params: MeshParams, tol: float) -> list[int]:
+    """Ids of the faces mesh_model meshes itself from the start (own_faces.py), none when not own_large_faces."""
+    if not params.own_large_faces or params.force_fallback:
+        return []
+    return faces_to_mesh_ourselves(model.faces, tol)
+
+
 def brepmesh_model(model: CadModel, params: MeshParams) -> float:
-    """The model's absolute tolerance, after run_brepmesh meshed its shape at it."""
+    """The model's absolute tolerance, after run_brepmesh meshed its shape at it, all but own_faces."""
     tol = absolute_tolerance(model, params)
-    run_brepmesh(model.shape, tol, params)
+    skip = own_faces(model, params, tol)
+    if skip:
+        run_brepmesh(model.shape, tol, params, [model.faces[i] for i in skip])
+    else:
+        run_brepmesh(model.shape, tol, params)
     return tol
 
 
@@ -135,10 +147,13 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     patches: list[FacePatch | None] = []
     fallback: dict[int, str] = {}
     bulk = bulk_triangulation_arrays(model.faces) if not params.force_fallback else [None] * n_faces
+    own = set(own_faces(model, params, tol))
     for i, face in enumerate(model.faces):
         prog("meshing", 0.4 + 0.1 * i / max(n_faces, 1))
-        p = None if params.force_fallback else extract_patch(i, face, topo, bulk[i])
-        if p is None:
+        p = None if params.force_fallback or i in own else extract_patch(i, face, topo, bulk[i])
+        if i in own:
+            fallback[i] = "large_curved"
+        elif p is None:
             fallback[i] = "forced" if params.force_fallback else "no_triangulation"
         elif p.meshed_by == "occt" and not check_patch_boundary(p):
             fallback[i] = "broken_triangulation"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,7 +23,7 @@ from OCP.IMeshTools import (
     IMeshTools_MeshAlgoType_Watson,
     IMeshTools_Parameters,
 )
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
@@ -46,6 +47,7 @@ class MeshParams:
     force_fallback: bool = False
     sample_order: int = 6
     coarsen_circles: bool = True  # re-discretise circles OCCT over-refines where only planes and cylinders meet
+    own_large_faces: bool = True  # mesh large curved analytic faces ourselves, not with BRepMesh (own_faces.py)
     occt_surface_control: bool = False  # OCCT's own deflection check of face interiors (ours replaces it)
 
     def validate(self) -> None:
@@ -77,10 +79,26 @@ def occt_pool_untouched() -> bool:
     return not _pool_started and "cadquery" not in sys.modules
 
 
-def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams) -> None:
-    """Clear any earlier triangulation (a stale one is silently reused otherwise), then BRepMesh the shape (edges
-    at the tolerance; face interiors without OCCT's surface deflection control unless occt_surface_control)."""
+def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams,
+                 skip: Sequence[TopoDS_Face] = ()) -> None:
+    """Clear any earlier triangulation (a stale one is silently reused otherwise), then BRepMesh the shape, or with
+    `skip` a compound of its faces but those (edges at the tolerance; face interiors without OCCT's surface
+    deflection control unless occt_surface_control)."""
     BRepTools.Clean_s(shape)
+    if skip:
+        left_out = TopTools_IndexedMapOfShape()
+        for f in skip:
+            left_out.Add(f)
+        builder, comp = BRep_Builder(), TopoDS_Compound()
+        builder.MakeCompound(comp)
+        kept = 0
+        for f in explore(shape, TopAbs_FACE, TopoDS.Face_s):
+            if not left_out.Contains(f):
+                builder.Add(comp, f)
+                kept += 1
+        if not kept:
+            return
+        shape = comp
     p = IMeshTools_Parameters()
     p.Deflection = tolerance
     p.Angle = params.angular

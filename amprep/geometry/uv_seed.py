@@ -114,8 +114,10 @@ def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarra
         seg, j = _ranks(k)
         t = j / k[seg]
         samples.append(a[seg] + t[:, None] * (b - a)[seg])
-    distance = cKDTree(np.concatenate(samples)).query(points)[0]
-    return distance > KEEP_OFF * shorter + spacing
+    reach = KEEP_OFF * shorter + spacing
+    # bounded: a point far inside (most of them) costs a walk through the whole tree otherwise (inf: beyond)
+    distance = cKDTree(np.concatenate(samples)).query(points, distance_upper_bound=float(reach.max()) * 1.01)[0]
+    return distance > reach
 
 
 def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float,
