@@ -196,15 +196,16 @@ def test_a_close_call_is_measured_again_on_a_finer_grid_instead_of_re_meshed(ref
     from amprep.geometry.tessellate import run_brepmesh
 
     model = model_from_shape(reference_solids["torus"])
-    res = mesh_model(model, MeshParams(tolerance=0.001))
-    run_brepmesh(model.shape, 0.001, MeshParams(tolerance=0.001))
+    params = MeshParams(tolerance=0.001, own_large_faces=False)  # the torus is OCCT's to mesh here
+    res = mesh_model(model, params)
+    run_brepmesh(model.shape, 0.001, params)
     from amprep.geometry.tessellate import bulk_triangulation_arrays
 
     occt_triangles = sum(len(b[2]) for b in bulk_triangulation_arrays(model.faces) if b is not None)
     assert res.fallback_faces == {} and res.mesh.n_triangles == occt_triangles
     assert mesher.TRIGGER_MARGIN < res.max_error / 0.001 <= mesher.FINE_MARGIN
     monkeypatch.setattr(mesher, "FINE_MARGIN", 0.99)  # the finer measure no longer clears the doubt: re-meshed
-    strict = mesh_model(model, MeshParams(tolerance=0.001))
+    strict = mesh_model(model, params)
     assert strict.fallback_faces == {0: "tolerance"} and strict.max_error <= 0.001 * mesher.FINE_MARGIN
 
 
@@ -270,6 +271,23 @@ def test_coarsened_circles_cost_no_triangles_and_a_coarsening_that_would_add_som
     forced = mesh_model(model, MeshParams(tolerance=0.01))
     n_forced = check(forced)
     assert n_forced[44] == n_occt[44] and 44 not in forced.fallback_faces
+
+
+def test_coarsening_re_meshes_at_most_its_budget_of_faces(monkeypatch):
+    """CTC-02 at 0.1 mm has 161 faces on circles worth coarsening: COARSEN_MAX_FACES of them are re-meshed (re-meshing
+    costs ~1.5 ms a face, whatever it saves); with no budget all are, for fewer triangles still."""
+    from amprep.geometry import mesher
+
+    model = read_cad(corpus("nist_ctc02_ap242.stp"))
+    budget = mesh_model(model, MeshParams(tolerance=0.1))
+    some = [i for i, why in budget.fallback_faces.items() if why == "coarsened"]
+    assert 0 < len(some) <= mesher.COARSEN_MAX_FACES
+    monkeypatch.setattr(mesher, "COARSEN_MAX_FACES", 10**6)
+    unlimited = mesh_model(model, MeshParams(tolerance=0.1))
+    every = [i for i, why in unlimited.fallback_faces.items() if why == "coarsened"]
+    assert len(every) > 4 * len(some) and unlimited.mesh.n_triangles < budget.mesh.n_triangles
+    for r in (budget, unlimited):
+        assert check_mesh(r.mesh).closed and r.max_error <= 0.1
 
 
 def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
