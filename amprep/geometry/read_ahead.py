@@ -20,7 +20,7 @@ from .mesher import brepmesh_model
 from .tessellate import MeshParams, occt_pool_untouched
 
 #: kernels are warmed only when the child has not finished within this many seconds: a file that reads and meshes
-#: faster is small, and may never need them
+#: faster is small, and may never need them (nor one the child has finished by the time numba is imported)
 WARM_AFTER = 0.15
 
 
@@ -49,7 +49,7 @@ def read_and_mesh_ahead(path: str | Path, fmt: str, params: MeshParams) -> tuple
     if not job.forked:
         return read_and_mesh(path, fmt, params)
     if not job.ready(WARM_AFTER):
-        warm_kernels()
+        warm_kernels(stop=job.ready)
     data, units, sewn, tol = job.result()
     shape = TopoDS_Shape()
     BinTools.Read_s(shape, io.BytesIO(data))

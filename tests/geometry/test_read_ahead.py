@@ -121,3 +121,17 @@ def test_a_daemonic_process_does_its_work_itself():
     forked, same_process, pool = queue.get(timeout=60)
     proc.join(60)
     assert not forked and same_process and not pool
+
+
+@pytest.mark.parametrize("stop, loaded", [(True, "False"), (False, "True")])
+def test_warming_stops_after_importing_numba_when_the_file_is_read_already(stop, loaded):
+    """A fresh process: warm_kernels imports numba, then loads and dispatches the kernels only while stop() is False
+    (a small part read meanwhile never pays the rest of numba's start-up; its measures stay in numpy)."""
+    import subprocess
+    import sys
+
+    code = (f"import sys; from amprep.geometry import chordal; chordal.warm_kernels(stop=lambda: {stop}); "
+            "print(chordal.kernels_loaded(), 'numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [loaded, "True"]
