@@ -56,7 +56,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
     params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular,
                         min_size=args.min_size, algorithm=args.algorithm,
-                        coarsen_circles=not args.keep_occt_circles)
+                        coarsen_circles=not args.keep_occt_circles, own_large_faces=not args.occt_large_faces)
     update, close = _progress_bar(args.quiet)
     try:
         result = convert(args.input, params, update)
@@ -270,6 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--algorithm", choices=["delabella", "watson"], default="delabella", help="OCCT mesh algorithm")
     c.add_argument("--keep-occt-circles", action="store_true",
                    help="keep OCCT's discretisation of circles it over-refines (more triangles)")
+    c.add_argument("--occt-large-faces", action="store_true",
+                   help="let OCCT mesh large torus faces too (by default they are ours: faster, fewer triangles)")
     c.add_argument("--ascii", action="store_true", help="ASCII STL instead of binary")
     c.add_argument("--report", help="write a JSON summary here")
     c.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")

@@ -29,6 +29,9 @@ class _MeshingParams(_Params):
     coarsen_circles: bool = Field(True, description="Re-discretise circles OCCT over-refines where only planes, "
                                   "cylinders and cones meet them (fewer triangles, same tolerance); false keeps "
                                   "OCCT's edge discretisation")
+    own_large_faces: bool = Field(True, description="Mesh torus faces expected to need 20,000 triangles or more "
+                                  "ourselves from curvature-sized points (faster than OCCT, fewer triangles); false "
+                                  "leaves every face to OCCT's BRepMesh")
 
 
 class ConvertParams(_MeshingParams):

@@ -89,3 +89,23 @@ def test_keep_occt_circles_gives_occts_count_and_the_default_fewer(tmp_path):
         assert summary["provenance"]["params"]["coarsen_circles"] is (not flag)
         counts[bool(flag)] = read_stl(out).n_triangles
     assert counts[False] < 0.8 * counts[True]
+
+
+def test_large_torus_faces_are_ours_unless_occt_large_faces(tmp_path):
+    """A torus R20 r5 STEP at 0.01 mm: its face is meshed by us (fallback reason large_curved, fewer triangles);
+    --occt-large-faces leaves it to BRepMesh; both closed and within tolerance, and the report says which."""
+    import cadquery as cq
+
+    step = tmp_path / "torus.step"
+    cq.exporters.export(cq.Workplane().add(cq.Solid.makeTorus(20, 5)), str(step))
+    counts = {}
+    for flag in ([], ["--occt-large-faces"]):
+        out, report = tmp_path / f"t{len(flag)}.stl", tmp_path / f"t{len(flag)}.json"
+        r = run("convert", str(step), "-o", str(out), "--tolerance", "0.01", "--report", str(report), *flag)
+        assert r.returncode == 0, r.stderr
+        summary = json.loads(report.read_text())
+        assert summary["mesh"]["watertight"] is True and summary["meshing"]["max_chordal_error"] <= 0.01
+        assert summary["provenance"]["params"]["own_large_faces"] is (not flag)
+        assert summary["meshing"]["fallback_faces"] == ({} if flag else {"0": "large_curved"})
+        counts[bool(flag)] = read_stl(out).n_triangles
+    assert counts[False] < 0.9 * counts[True]
