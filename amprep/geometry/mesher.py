@@ -115,11 +115,7 @@ def own_faces(model: CadModel, params: MeshParams, tol: float) -> list[int]:
 def brepmesh_model(model: CadModel, params: MeshParams) -> float:
     """The model's absolute tolerance, after run_brepmesh meshed its shape at it, all but own_faces."""
     tol = absolute_tolerance(model, params)
-    skip = own_faces(model, params, tol)
-    if skip:
-        run_brepmesh(model.shape, tol, params, [model.faces[i] for i in skip])
-    else:
-        run_brepmesh(model.shape, tol, params)
+    run_brepmesh(model.shape, tol, params, [model.faces[i] for i in own_faces(model, params, tol)])
     return tol
 
 

@@ -47,7 +47,7 @@ class MeshParams:
     force_fallback: bool = False
     sample_order: int = 6
     coarsen_circles: bool = True  # re-discretise circles OCCT over-refines where only planes and cylinders meet
-    own_large_faces: bool = True  # mesh large curved analytic faces ourselves, not with BRepMesh (own_faces.py)
+    own_large_faces: bool = True  # mesh large torus faces ourselves, not with BRepMesh (own_faces.py)
     occt_surface_control: bool = False  # OCCT's own deflection check of face interiors (ours replaces it)
 
     def validate(self) -> None:
