@@ -44,9 +44,12 @@ def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.n
     # them or to the end
     pts = np.array([curve.Value(t).Coord() for t in params])
     eps = MIN_SPACING * tolerance
+    if (np.linalg.norm(np.diff(pts, axis=0), axis=1) > eps).all() and (
+            np.linalg.norm(pts[-1] - pts[1:-1], axis=1) > eps).all():
+        return params  # the usual case: no point too near another, nothing to walk
     keep = np.ones(len(params), bool)
     last_kept = pts[0]
-    for i in range(1, len(params) - 1):
+    for i in range(1, len(params) - 1):  # a drop moves the reference point: sequential, on the rare edge
         if np.linalg.norm(pts[i] - last_kept) <= eps or np.linalg.norm(pts[-1] - pts[i]) <= eps:
             keep[i] = False
         else:

@@ -292,8 +292,9 @@ def test_coarsening_re_meshes_at_most_its_budget_of_faces(monkeypatch):
 
 def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     """CTC-02's face 174 at 0.001 mm, re-meshed from OCCT's interior nodes (not the curvature-sized points, which
-    this face, curved one way, does without): insertion once put two nodes 3.2e-6 mm apart (one vertex after float32 rounding in the STL: degenerate triangles, non-manifold edges). Inserted and
-    seeded points now keep MIN_SPACING × tolerance from every other node."""
+    this face, curved one way, does without): insertion once put two nodes 3.2e-6 mm apart (one vertex after
+    float32 rounding in the STL: degenerate triangles, non-manifold edges). Inserted and seeded points now keep
+    MIN_SPACING × tolerance from every other node."""
     from scipy.spatial import cKDTree
 
     from amprep.geometry import fallback, uv_cdt
