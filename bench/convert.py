@@ -177,7 +177,10 @@ def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
         out = str(Path(tmp) / "out.stl")
         cmd = [sys.executable, __file__, "--child", tool, str(path), str(tol), out]
         with open(Path(tmp) / "result.json", "w+") as sink:
-            proc = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True)
+            # every tool's child with numpy's BLAS threads off (amprep sets this itself): the child's numpy, imported
+            # by this script, would otherwise spin a thread that slows OCCT's STEP reader by ~15 %
+            env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+            proc = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True, env=env)
             start = time.monotonic()
             pid, status, _ = os.wait4(proc.pid, os.WNOHANG)
             while pid == 0 and time.monotonic() - start < timeout:

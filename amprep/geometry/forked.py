@@ -4,6 +4,7 @@ crash in a C library) becomes an error instead of taking the caller down. Inline
 
 from __future__ import annotations
 
+import gc
 import multiprocessing as mp
 import os
 import pickle
@@ -55,6 +56,9 @@ class Forked(Generic[T]):
         pid = os.fork()
         if pid == 0:  # the child: never returns into the caller's code
             code = 0
+            # a collection would walk every object inherited from the parent, writing to their pages (copied on
+            # write, thousands of page faults); the child is short-lived and exits without collecting
+            gc.freeze()
             try:
                 os.close(read)
                 try:

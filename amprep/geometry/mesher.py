@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from OCP.Bnd import Bnd_Box
+from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepBndLib import BRepBndLib
 from OCP.GeomAbs import GeomAbs_Circle
@@ -18,6 +19,7 @@ from .chordal import COMPILED_MIN_POINTS, barycentric_grid, kernels_loaded, load
 from .errors import AmprepError, ErrorCode
 from .face_pool import map_faces
 from .fallback import discretize_missing_edges, has_pole, mesh_face, split_edge_to_tolerance
+from .first_look import first_look, patch_error
 from .mesh import FaceInfo, Mesh
 from .own_faces import faces_to_mesh_ourselves
 from .patch_refine import flat_triangles, flip_flat_triangles, refine_patch
@@ -28,8 +30,6 @@ from .tessellate import (
     MeshParams,
     Topology,
     bulk_triangulation_arrays,
-    check_patch_boundary,
-    extract_patch,
     face_edges,
     run_brepmesh,
 )
@@ -119,16 +119,6 @@ def brepmesh_model(model: CadModel, params: MeshParams) -> float:
     return tol
 
 
-def patch_error(patch: FacePatch, surface: Surface | None, order: int) -> np.ndarray:
-    """(t,) chordal error of each triangle of a patch (nan when the face has no surface or no (u,v))."""
-    if surface is None or patch.uv is None or patch.meshed_by == "stored":
-        return np.full(len(patch.tris), np.nan)
-    if patch.error is not None:  # the fallback mesher measured its own triangles
-        return patch.error
-    return triangle_chordal_error(patch.nodes[patch.tris], patch.uv[patch.tris], surface, order,
-                                  affine=surface.affine)
-
-
 def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: ProgressFn | None = None,
                meshed_at: float | None = None) -> MeshResult:
     """Tessellate every face; re-mesh from the shared edge discretisation any face OCCT leaves unmeshed or
@@ -143,28 +133,10 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     topo = Topology.of(model.shape)
     n_faces = len(model.faces)
     min_area = DEGENERATE_REL_AREA * bbox_diagonal(model, meshed=True) ** 2  # as checks.degenerate_mask has it
-    patches: list[FacePatch | None] = []
-    fallback: dict[int, str] = {}
     bulk = bulk_triangulation_arrays(model.faces) if not params.force_fallback else [None] * n_faces
     own = set(own_faces(model, params, tol))
-    for i, face in enumerate(model.faces):
-        prog("meshing", 0.4 + 0.1 * i / max(n_faces, 1))
-        p = None if params.force_fallback or i in own else extract_patch(i, face, topo, bulk[i])
-        if i in own:
-            fallback[i] = "large_curved"
-        elif p is None:
-            fallback[i] = "forced" if params.force_fallback else "no_triangulation"
-        elif p.meshed_by == "occt" and not check_patch_boundary(p):
-            fallback[i] = "broken_triangulation"
-            p = None
-        elif p.meshed_by == "occt" and flat_triangles(p, min_area).any():
-            fallback[i] = "degenerate_triangles"
-            p = None
-        patches.append(p)
-    prog("meshing", 0.5)
-    surfaces: list[Surface | None] = [
-        None if (p is not None and p.meshed_by == "stored") else surface_of(f) for p, f in zip(patches, model.faces, strict=False)
-    ]
+    surfaces: list[Surface | None] = [surface_of(f) if BRep_Tool.Surface_s(f) is not None else None
+                                      for f in model.faces]  # none: a tessellated-only face (stored triangles)
     # every face's error will be measured: a large part pays numba's start-up once (B-splines sooner: numpy
     # evaluates them ~5× slower than closed forms)
     points = len(barycentric_grid(params.sample_order))
@@ -173,6 +145,20 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
                     and sf.surface_type in ("bspline", "bezier"))
     if sum(tri_count) * points >= COMPILED_MIN_POINTS or free_form * points >= COMPILED_MIN_POINTS / 3:
         load_kernels()
+    prog("meshing", 0.45)
+    skip = {i: "large_curved" for i in own} if not params.force_fallback else dict.fromkeys(range(n_faces), "forced")
+    looks = first_look(model.faces, topo, bulk, surfaces, skip, params.sample_order, min_area)
+    patches: list[FacePatch | None] = []
+    fallback: dict[int, str] = {}
+    first_error: dict[int, np.ndarray] = {}
+    for i, look in enumerate(looks):
+        look.found.record(topo)
+        patches.append(look.found.assemble(model.faces[i], bulk[i]) if look.reason is None else None)
+        if look.reason is not None:
+            fallback[i] = look.reason
+        elif look.error is not None:
+            first_error[i] = look.error
+    prog("meshing", 0.5)
     coarsened: set[int] = set()
     occt_params: dict[int, np.ndarray] = {}
     occt_patches = list(patches)
@@ -214,7 +200,11 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
             unmeshed = [i for i in unmeshed if i not in back]
         for i in range(n_faces):
             stage("measuring chordal error", 0.5 + 0.5 * i / n_faces)
-            if patches[i] is not None and (round_ == 0 or i in todo):
+            if patches[i] is None or not (round_ == 0 or i in todo):
+                continue
+            if round_ == 0 and i in first_error and patches[i] is occt_patches[i]:
+                errors[i] = first_error[i]
+            else:
                 errors[i] = patch_error(patches[i], surfaces[i], params.sample_order)
         if not params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
             break
@@ -270,6 +260,10 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
     return MeshResult(mesh, tol, face_error, fallback, tuple(sorted(set(unmeshed))))
 
 
+#: re-meshing a face costs about this many triangles' time (face_pool's unit) whatever its size
+REMESH_PER_FACE = 100
+
+
 def _costliest_first(fn: Callable[[int], FacePatch | None], faces: list[int], patches: list[FacePatch | None],
                      errors: list[np.ndarray], target: float) -> dict[int, FacePatch | None]:
     """{i: fn(i)} for the faces, through face_pool.map_faces, costliest first by _remesh_cost. In parallel only once
@@ -281,13 +275,14 @@ def _costliest_first(fn: Callable[[int], FacePatch | None], faces: list[int], pa
 
 
 def _remesh_cost(patch: FacePatch | None, error: np.ndarray, target: float) -> float:
-    """Triangles a face's new mesh is expected to have: Σ max(1, ε_T / target) over its old triangles (ε ∝ h², so a
-    triangle ε/target over the target needs about that many in its place); its boundary nodes when it has none."""
+    """Time to re-mesh a face in triangles' worth: REMESH_PER_FACE plus the triangles its new mesh is expected to have,
+    Σ max(1, ε_T / target) over its old triangles (ε ∝ h², so a triangle ε/target over the target needs about that
+    many in its place), or its old triangle count when not measured."""
     if patch is None:
-        return 0.0
+        return REMESH_PER_FACE
     if len(error) != len(patch.tris) or not len(error):
-        return float(len(patch.tris))
-    return float(np.maximum(np.nan_to_num(error / target, nan=1.0), 1.0).sum())
+        return REMESH_PER_FACE + float(len(patch.tris))
+    return REMESH_PER_FACE + float(np.maximum(np.nan_to_num(error / target, nan=1.0), 1.0).sum())
 
 
 def coarsen_circle_edges(model: CadModel, topo: Topology, patches: list[FacePatch | None],

@@ -210,6 +210,7 @@ class Topology:
     vertices: TopTools_IndexedMapOfShape
     edge_params: dict[int, np.ndarray] = field(default_factory=dict)
     parent: dict[int, int] = field(default_factory=dict)  # union-find over B-rep vertices of collapsed edges
+    _facts: dict[int, tuple[int, int, float, int, float, bool]] = field(default_factory=dict, repr=False)
 
     def merge_vertices(self, a: int, b: int) -> None:
         """Record that the mesher collapsed an edge: its two end vertices become one mesh vertex."""
@@ -244,10 +245,18 @@ class Topology:
 
     def edge_ends(self, edge: TopoDS_Edge) -> tuple[int, float, int, float]:
         """(first vertex, its parameter, last vertex, its parameter) of an edge, orientation ignored."""
-        e = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
-        v1, v2 = TopExp.FirstVertex_s(e), TopExp.LastVertex_s(e)
-        return (self.vertex_index(v1), BRep_Tool.Parameter_s(v1, e),
-                self.vertex_index(v2), BRep_Tool.Parameter_s(v2, e))
+        return self.edge_facts(edge)[1:5]  # type: ignore[return-value]
+
+    def edge_facts(self, edge: TopoDS_Edge) -> tuple[int, int, float, int, float, bool]:
+        """(edge index, edge_ends..., degenerated) of an edge, asked of OCCT once per edge (a cache on the topology)."""
+        ei = self.edge_index(edge)
+        known = self._facts.get(ei)
+        if known is None:
+            e = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
+            v1, v2 = TopExp.FirstVertex_s(e), TopExp.LastVertex_s(e)
+            known = self._facts[ei] = (ei, self.vertex_index(v1), BRep_Tool.Parameter_s(v1, e), self.vertex_index(v2),
+                                       BRep_Tool.Parameter_s(v2, e), bool(BRep_Tool.Degenerated_s(e)))
+        return known
 
 
 def explore(shape: TopoDS_Shape, kind, cast) -> list:  # type: ignore[no-untyped-def,type-arg]
@@ -265,61 +274,148 @@ def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
     return explore(face, TopAbs_EDGE, TopoDS.Edge_s)
 
 
-def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology,
-                  arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray] | None = None) -> FacePatch | None:
-    """A face's OCCT triangulation as a FacePatch with edge keys, or None when it has none or a broken one
-    (`arrays`: its triangulation_arrays when already read in bulk)."""
+@dataclass
+class PatchRead:
+    """What read_patch found on one face, compact enough to send between processes: the keys of its boundary nodes
+    (`keys`: node ids, B-rep vertex, B-rep edge, parameter on it, (b,) each; None when the face has no or a broken
+    triangulation), each B-rep edge's discretisation (`edges` (e,) indices, `sizes` (e,), `params` (Σ sizes,) in
+    the polygons' order), the B-rep vertex pairs BRepMesh collapsed into one node (an edge shorter than its min
+    size), and `stored` for a tessellated-only face. `patch`, the assembled FacePatch, stays in its process."""
+
+    face_id: int
+    keys: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    edges: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    sizes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    params: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    merges: list[tuple[int, int]] = field(default_factory=list)
+    stored: bool = False
+    patch: FacePatch | None = None
+
+    def __getstate__(self) -> dict:  # type: ignore[type-arg]
+        return {**self.__dict__, "patch": None}
+
+    def record(self, topo: Topology) -> None:
+        """Add the edges' discretisations (sorted, where topo has none yet) and the collapses to the topology."""
+        ends = np.cumsum(self.sizes)
+        for ei, end, size in zip(self.edges.tolist(), ends.tolist(), self.sizes.tolist(), strict=True):
+            if ei not in topo.edge_params:
+                topo.edge_params[ei] = np.sort(self.params[end - size:end])
+        for a, b in self.merges:
+            topo.merge_vertices(a, b)
+
+    def assemble(self, face: TopoDS_Face, arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray] | None = None
+                 ) -> FacePatch | None:
+        """The face's FacePatch (kept in `patch`) from its triangulation (`arrays`: its triangulation_arrays when
+        read in bulk) and the keys; None when there are no keys."""
+        if self.patch is not None or self.keys is None:
+            return self.patch
+        loc = TopLoc_Location()
+        tri = BRep_Tool.Triangulation_s(face, loc)
+        nodes, uv, tris = arrays if arrays is not None else triangulation_arrays(tri)
+        nodes = apply_trsf(trsf_matrix(loc), nodes)
+        if face.Orientation() == TopAbs_REVERSED:
+            tris = tris[:, [0, 2, 1]]
+        k = len(nodes)
+        ids, vertex, edge, param = self.keys
+        node_vertex = np.full(k, -1, np.int64)
+        node_edge = np.full(k, -1, np.int64)
+        node_param = np.full(k, np.nan)
+        node_vertex[ids], node_edge[ids], node_param[ids] = vertex, edge, param
+        self.patch = FacePatch(self.face_id, nodes, uv, tris, node_vertex, node_edge, node_param,
+                               meshed_by="stored" if self.stored else "occt")
+        return self.patch
+
+
+def read_patch(face_id: int, face: TopoDS_Face, topo: Topology,
+               arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray] | None = None) -> PatchRead:
+    """The keys of a face's OCCT triangulation, its patch assembled, leaving `topo`'s discretisations unchanged (so
+    faces can be read in any process; PatchRead.record adds what was found). `arrays`: its triangulation_arrays
+    when read in bulk. A face with an edge polygon missing, without parameters or out of range gives no keys."""
     loc = TopLoc_Location()
     tri = BRep_Tool.Triangulation_s(face, loc)
+    none = PatchRead(face_id)
     if tri is None or tri.NbTriangles() == 0:
-        return None
-    nodes, uv, tris = arrays if arrays is not None else triangulation_arrays(tri)
-    k = len(nodes)
+        return none
+    arrays = arrays if arrays is not None else triangulation_arrays(tri)
+    k, tris = len(arrays[0]), arrays[2]
     if tris.min(initial=0) < 0 or tris.max(initial=0) >= k:
-        return None
-    nodes = apply_trsf(trsf_matrix(loc), nodes)
-    if face.Orientation() == TopAbs_REVERSED:
-        tris = tris[:, [0, 2, 1]]
-    node_vertex = np.full(k, -1, np.int64)
-    node_edge = np.full(k, -1, np.int64)
-    node_param = np.full(k, np.nan)
+        return none
     has_surface = BRep_Tool.Surface_s(face) is not None
+    ids: list[int] = []  # 1-based polygon nodes of every edge, one after the other
+    par: list[float] = []
+    facts, sizes, pole_nodes, pole_vertex = [], [], [], []
     for edge in face_edges(face):
         poly = BRep_Tool.PolygonOnTriangulation_s(edge, tri, loc)
         if poly is None:
             if not has_surface:  # tessellated-only face: topology is the file's shared coordinates
                 continue
-            return None
-        ids = np.array([poly.Node(i) for i in range(1, poly.NbNodes() + 1)], dtype=np.int64) - 1
+            return none
         if not poly.HasParameters():
-            return None
-        par = np.array([poly.Parameter(i) for i in range(1, poly.NbNodes() + 1)])
-        if ids.min() < 0 or ids.max() >= k:
-            return None
-        ei = topo.edge_index(edge)
-        v1, p1, v2, p2 = topo.edge_ends(edge)
-        if BRep_Tool.Degenerated_s(edge):
-            node_vertex[ids] = v1
+            return none
+        n = poly.NbNodes()
+        fact = topo.edge_facts(edge)
+        if fact[5]:  # degenerated: a pole, all its nodes on the vertex
+            pole_nodes.extend(poly.Node(i) for i in range(1, n + 1))
+            pole_vertex.extend([fact[1]] * n)
             continue
-        topo.edge_params.setdefault(ei, np.sort(par))
-        node_edge[ids] = ei
-        node_param[ids] = par
-        ends = ids[[0, -1]]
-        end_par = par[[0, -1]]
-        if ends[0] == ends[1] and v1 != v2:  # BRepMesh collapsed an edge shorter than its min size
-            topo.merge_vertices(v1, v2)
-        for node, t in zip(ends, end_par, strict=False):
-            node_vertex[node] = v1 if abs(t - p1) <= abs(t - p2) else v2
-    return FacePatch(face_id, nodes, uv, tris, node_vertex, node_edge, node_param,
-                     meshed_by="occt" if has_surface else "stored")
+        ids.extend([poly.Node(i) for i in range(1, n + 1)])
+        par.extend([poly.Parameter(i) for i in range(1, n + 1)])
+        facts.append(fact)
+        sizes.append(n)
+    node_ids = np.array(ids, dtype=np.int64) - 1
+    poles = np.array(pole_nodes, dtype=np.int64) - 1
+    if min(node_ids.min(initial=0), poles.min(initial=0)) < 0 or max(node_ids.max(initial=-1), poles.max(initial=-1)) >= k:
+        return none
+    node_vertex = np.full(k, -1, np.int64)
+    node_edge = np.full(k, -1, np.int64)
+    node_param = np.full(k, np.nan)
+    params = np.array(par)
+    found = PatchRead(face_id, stored=not has_surface)
+    if facts:
+        fa = np.array(facts, dtype=float)
+        sizes_a = np.array(sizes, dtype=np.int64)
+        node_edge[node_ids] = np.repeat(fa[:, 0].astype(np.int64), sizes_a)
+        node_param[node_ids] = params
+        last = np.cumsum(sizes_a) - 1
+        first = last - sizes_a + 1
+        both = np.concatenate([first, last])
+        ends = node_ids[both].reshape(2, -1).T  # (edges, 2) end nodes and their parameters
+        end_par = params[both].reshape(2, -1).T
+        v1, p1, v2, p2 = (fa[:, j:j + 1] for j in range(1, 5))
+        end_vertex = np.where(np.abs(end_par - p1) <= np.abs(end_par - p2), v1, v2).astype(np.int64)
+        node_vertex[ends.reshape(-1)] = end_vertex.reshape(-1)
+        found.edges, found.sizes, found.params = fa[:, 0].astype(np.int64), sizes_a, params
+        collapsed = np.flatnonzero((ends[:, 0] == ends[:, 1]) & (fa[:, 1] != fa[:, 3]))  # BRepMesh collapsed an
+        found.merges = [(facts[j][1], facts[j][3]) for j in collapsed]  # edge shorter than its min size
+    if len(poles):
+        node_vertex[poles] = pole_vertex
+    keyed = np.flatnonzero((node_vertex >= 0) | (node_edge >= 0))
+    found.keys = (keyed, node_vertex[keyed], node_edge[keyed], node_param[keyed])
+    found.assemble(face, arrays)
+    return found
+
+
+def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology,
+                  arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray] | None = None) -> FacePatch | None:
+    """read_patch, with what it found recorded in `topo`: the face's patch, or None when it has no or a broken
+    triangulation."""
+    found = read_patch(face_id, face, topo, arrays)
+    found.record(topo)
+    return found.patch
+
+
+def off_boundary_edges(patch: FacePatch) -> np.ndarray:
+    """(e, 2) node pairs of the edges used by one triangle only that do not lie on the B-rep boundary (an end on
+    neither an edge nor a vertex): none in a sound patch."""
+    t = patch.tris
+    a, b = t.reshape(-1), t[:, [1, 2, 0]].reshape(-1)  # the directed edges (a → b) of every triangle
+    key = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
+    _, inv, cnt = np.unique(key[:, 0] * (len(patch.nodes) + 1) + key[:, 1], return_inverse=True, return_counts=True)
+    once = key[cnt[inv.reshape(-1)] == 1]
+    on_boundary = (patch.node_edge >= 0) | (patch.node_vertex >= 0)
+    return once[~on_boundary[once].all(axis=1)]
 
 
 def check_patch_boundary(patch: FacePatch) -> bool:
     """True when every edge used once within the face lies on its B-rep boundary (both ends on edges/vertices)."""
-    t = patch.tris
-    d = np.stack([t, np.roll(t, -1, axis=1)], axis=2).reshape(-1, 2)
-    key = np.sort(d, axis=1)
-    _, inv, cnt = np.unique(key[:, 0] * (len(patch.nodes) + 1) + key[:, 1], return_inverse=True, return_counts=True)
-    once = key[cnt[inv] == 1]
-    on_boundary = (patch.node_edge >= 0) | (patch.node_vertex >= 0)
-    return bool(on_boundary[once].all())
+    return len(off_boundary_edges(patch)) == 0
