@@ -32,18 +32,34 @@ def stl_bytes(mesh: Mesh, ascii: bool = False, header: str = "amprep") -> bytes:
         ) if len(rows) else ""
         name = header.replace("\n", " ")
         return f"solid {name}\n{body}endsolid {name}\n".encode()
-    data = np.zeros(mesh.n_triangles, _BINARY)
+    return _binary_head(mesh, header) + _binary_records(corners, normals).tobytes()
+
+
+def _binary_head(mesh: Mesh, header: str) -> bytes:
+    """The 80-byte header (never starting "solid", which would make it look ASCII) and the triangle count."""
+    head = header.encode("ascii", "replace")[:80].ljust(80, b" ")
+    if head.lower().startswith(b"solid"):
+        head = (b"amprep " + head)[:80]
+    return head + np.uint32(mesh.n_triangles).tobytes()
+
+
+def _binary_records(corners: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(m,) binary STL records: normal, corners (float32), attribute 0."""
+    data = np.zeros(len(corners), _BINARY)
     data["normal"] = normals
     data["corners"] = corners
-    head = header.encode("ascii", "replace")[:80].ljust(80, b" ")
-    if head.lower().startswith(b"solid"):  # a binary STL must not look like an ASCII one
-        head = (b"amprep " + head)[:80]
-    return head + np.uint32(mesh.n_triangles).tobytes() + data.tobytes()
+    return data
 
 
 def write_stl(mesh: Mesh, path: str | Path, ascii: bool = False, header: str = "amprep") -> None:
-    """Write the mesh as STL to a file."""
-    Path(path).write_bytes(stl_bytes(mesh, ascii, header))
+    """Write the mesh as STL to a file (binary: the records straight from their array, no copy into one bytes)."""
+    if ascii:
+        Path(path).write_bytes(stl_bytes(mesh, ascii, header))
+        return
+    corners = mesh.corners
+    with Path(path).open("wb") as fh:
+        fh.write(_binary_head(mesh, header))
+        _binary_records(corners, triangle_normals(corners)).tofile(fh)
 
 
 def _index(corners: np.ndarray) -> Mesh:
