@@ -170,7 +170,7 @@ def test_parts(folder: Path, only: str = "") -> list[Path]:
     }
     out = []
     for name, make in parts.items():
-        if only and not any(s in name for s in only.split(",")):
+        if not _wanted(name, only):
             continue
         shape = make()
         p = folder / f"{name}.step"
@@ -179,13 +179,18 @@ def test_parts(folder: Path, only: str = "") -> list[Path]:
     return out
 
 
+def _wanted(name: str, only: str) -> bool:
+    """True when `only` (comma-separated substrings) is empty or names `name`."""
+    return not only or any(s in name for s in only.split(","))
+
+
 def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / "out.stl")
         cmd = [sys.executable, __file__, "--child", tool, str(path), str(tol), out]
         with open(Path(tmp) / "result.json", "w+") as sink:
-            # every tool's child with numpy's BLAS threads off (amprep sets this itself): the child's numpy, imported
-            # by this script, would otherwise spin a thread that slows OCCT's STEP reader by ~15 %
+            # every tool's child with numpy's BLAS threads off, as `import amprep` sets for amprep's (whose spinning
+            # slowed OCCT's STEP reader ~15 %): all tools run alike
             env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
             proc = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True, env=env)
             start = time.monotonic()
@@ -230,8 +235,7 @@ def main() -> None:
     tools = args.tools.split(",")
     tmp = Path(tempfile.mkdtemp(prefix="amprep-bench-"))
     parts = test_parts(tmp, args.only) + sorted(p for p in CORPUS.glob("*") if p.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep"))
-    if args.only:
-        parts = [p for p in parts if any(s in p.name for s in args.only.split(","))]
+    parts = [p for p in parts if _wanted(p.name, args.only)]
     rows = []
     for part in parts:
         diag = _diag(part)

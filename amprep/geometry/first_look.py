@@ -11,10 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 from OCP.TopoDS import TopoDS_Face
 
-from .chordal import kernels_loaded, triangle_chordal_error
+from .chordal import affine_chordal_bound, kernels_loaded, triangle_chordal_error
 from .face_pool import map_faces
 from .patch_refine import flat_triangles
-from .surfaces import Surface
+from .surfaces import Surface, plane
 from .tessellate import FacePatch, PatchRead, Topology, off_boundary_edges, read_patch
 
 #: faces per chunk
@@ -65,17 +65,13 @@ def stack_patches(patches: Sequence[FacePatch]) -> tuple[FacePatch, np.ndarray, 
 
 
 def _plane_errors(patches: Sequence[FacePatch], surfaces: Sequence[Surface]) -> list[np.ndarray]:
-    """patch_error of patches on planes, S(u,v) = O + u·X + v·Y evaluated at every node of all of them at once: the
-    exact bound max over a triangle's corners of |S(uv) − c| (chordal.affine_chordal_bound)."""
-    stacked, owner, offsets = stack_patches(patches)
-    frames = np.array([s.closed_form[1][:9] for s in surfaces])  # type: ignore[index]
-    node_owner = np.repeat(np.arange(len(patches)), np.diff(offsets))
-    f = frames[node_owner]
-    uv = stacked.uv
-    assert uv is not None
-    exact = f[:, 0:3] + uv[:, :1] * f[:, 3:6] + uv[:, 1:2] * f[:, 6:9]
-    dist = np.linalg.norm(exact - stacked.nodes, axis=1)
-    err = dist[stacked.tris].max(axis=1)
+    """patch_error of patches on planes, for all of them at once: chordal.affine_chordal_bound of every triangle,
+    each corner evaluated on its own face's plane (surfaces.plane with per-corner frames)."""
+    stacked, owner, _ = stack_patches(patches)
+    frames = np.array([s.closed_form[1][:9] for s in surfaces])[np.repeat(owner, 3)]  # type: ignore[index]
+    t = stacked.tris
+    err = affine_chordal_bound(stacked.nodes[t], stacked.uv[t],  # type: ignore[index]
+                               plane(frames[:, 0:3], frames[:, 3:6], frames[:, 6:9]))
     return np.split(err, np.cumsum([len(p.tris) for p in patches])[:-1])
 
 
@@ -157,8 +153,7 @@ class _Chunk:
 
 
 def _on_plane(patch: FacePatch, surface: Surface | None) -> bool:
-    return (surface is not None and surface.affine and surface.closed_form is not None and patch.uv is not None
-            and patch.meshed_by == "occt" and patch.error is None)
+    return surface is not None and surface.affine and surface.closed_form is not None and patch.uv is not None
 
 
 def first_look(faces: Sequence[TopoDS_Face], topo: Topology, bulk: Sequence, surfaces: Sequence[Surface | None],  # type: ignore[type-arg]

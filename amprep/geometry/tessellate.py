@@ -311,19 +311,26 @@ class PatchRead:
             return self.patch
         loc = TopLoc_Location()
         tri = BRep_Tool.Triangulation_s(face, loc)
-        nodes, uv, tris = arrays if arrays is not None else triangulation_arrays(tri)
-        nodes = apply_trsf(trsf_matrix(loc), nodes)
-        if face.Orientation() == TopAbs_REVERSED:
-            tris = tris[:, [0, 2, 1]]
-        k = len(nodes)
+        arrays = arrays if arrays is not None else triangulation_arrays(tri)
+        k = len(arrays[0])
         ids, vertex, edge, param = self.keys
         node_vertex = np.full(k, -1, np.int64)
         node_edge = np.full(k, -1, np.int64)
         node_param = np.full(k, np.nan)
         node_vertex[ids], node_edge[ids], node_param[ids] = vertex, edge, param
-        self.patch = FacePatch(self.face_id, nodes, uv, tris, node_vertex, node_edge, node_param,
-                               meshed_by="stored" if self.stored else "occt")
+        self._set_patch(face, loc, arrays, node_vertex, node_edge, node_param)
         return self.patch
+
+    def _set_patch(self, face: TopoDS_Face, loc: TopLoc_Location,
+                   arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray], node_vertex: np.ndarray,
+                   node_edge: np.ndarray, node_param: np.ndarray) -> None:
+        """`patch` from the face's triangulation arrays (local frame) moved by `loc`, oriented as the face, and the
+        node keys (k,) each."""
+        nodes, uv, tris = arrays
+        if face.Orientation() == TopAbs_REVERSED:
+            tris = tris[:, [0, 2, 1]]
+        self.patch = FacePatch(self.face_id, apply_trsf(trsf_matrix(loc), nodes), uv, tris, node_vertex, node_edge,
+                               node_param, meshed_by="stored" if self.stored else "occt")
 
 
 def read_patch(face_id: int, face: TopoDS_Face, topo: Topology,
@@ -391,7 +398,7 @@ def read_patch(face_id: int, face: TopoDS_Face, topo: Topology,
         node_vertex[poles] = pole_vertex
     keyed = np.flatnonzero((node_vertex >= 0) | (node_edge >= 0))
     found.keys = (keyed, node_vertex[keyed], node_edge[keyed], node_param[keyed])
-    found.assemble(face, arrays)
+    found._set_patch(face, loc, arrays, node_vertex, node_edge, node_param)
     return found
 
 
