@@ -27,9 +27,29 @@ SMALL_DIAG = 120.0  # mm: parts this small also run at 0.001 mm
 
 # ----------------------------------------------------------------------------------------- child side
 def _occt_read(path: str):
-    from amprep.geometry.cad import read_cad
+    """The bare OCCT read: the format's reader with its default shape healing, lengths in mm (no amprep code)."""
+    from OCP.BinTools import BinTools
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepTools import BRepTools
+    from OCP.IGESControl import IGESControl_Reader
+    from OCP.Interface import Interface_Static
+    from OCP.STEPControl import STEPControl_Reader
+    from OCP.TopoDS import TopoDS_Shape
 
-    return read_cad(path)
+    head = Path(path).read_bytes()[:80].lstrip()
+    if head.startswith(b"Open CASCADE Topology"):
+        shape = TopoDS_Shape()
+        BinTools.Read_s(shape, path)
+        return shape
+    if head.startswith((b"DBRep_DrawableShape", b"CASCADE Topology")):
+        shape = TopoDS_Shape()
+        BRepTools.Read_s(shape, path, BRep_Builder())
+        return shape
+    Interface_Static.SetCVal_s("xstep.cascade.unit", "MM")
+    reader = STEPControl_Reader() if head.startswith(b"ISO-10303-21") else IGESControl_Reader()
+    reader.ReadFile(path)
+    reader.TransferRoots()
+    return reader.OneShape()
 
 
 def _mesh_checks(stl: str) -> dict:
@@ -41,19 +61,20 @@ def _mesh_checks(stl: str) -> dict:
                 degenerate=c.degenerate_triangles, closed=c.closed)
 
 
-def _occt_deviation(model, tol: float) -> float:
+def _occt_deviation(shape, tol: float) -> float:
     """Worst chordal error / tolerance of OCCT's own per-face triangulations (as StlAPI_Writer exports them)."""
     import numpy as np
     from OCP.BRep import BRep_Tool
     from OCP.TopAbs import TopAbs_REVERSED
     from OCP.TopLoc import TopLoc_Location
 
+    from amprep.geometry.cad import model_from_shape
     from amprep.geometry.chordal import triangle_chordal_error
     from amprep.geometry.surfaces import surface_of
     from amprep.geometry.tessellate import apply_trsf, triangulation_arrays, trsf_matrix
 
     worst = 0.0
-    for face in model.faces:
+    for face in model_from_shape(shape).faces:
         loc = TopLoc_Location()
         tri = BRep_Tool.Triangulation_s(face, loc)
         if tri is None or BRep_Tool.Surface_s(face) is None:
@@ -91,20 +112,20 @@ def child(tool: str, path: str, tol: float, out: str) -> dict:
         from OCP.StlAPI import StlAPI_Writer
 
         t = time.perf_counter()
-        model = _occt_read(path)
+        shape = _occt_read(path)
         res["read_seconds"] = time.perf_counter() - t
-        BRepTools.Clean_s(model.shape)
+        BRepTools.Clean_s(shape)
         p = IMeshTools_Parameters()
         p.Deflection, p.Angle, p.InParallel = tol, 0.5, True
         p.MeshAlgo = IMeshTools_MeshAlgoType_Delabella if tool == "occt-delabella" else IMeshTools_MeshAlgoType_Watson
         t_mesh = time.perf_counter()
-        BRepMesh_IncrementalMesh(model.shape, p)
+        BRepMesh_IncrementalMesh(shape, p)
         res["mesh_seconds"] = time.perf_counter() - t_mesh
         w = StlAPI_Writer()
         w.ASCIIMode = False
-        w.Write(model.shape, out)
+        w.Write(shape, out)
         res["seconds"] = time.perf_counter() - t
-        res["deviation_ratio"] = _occt_deviation(model, tol)
+        res["deviation_ratio"] = _occt_deviation(shape, tol)
     elif tool == "cascadio":
         import cascadio
         import trimesh
