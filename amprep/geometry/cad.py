@@ -53,7 +53,7 @@ def _unit_name(raw: str) -> str:
 
 
 def _crossing_repair(reader: XSControl_Reader, on: bool) -> None:
-    """Turn OCCT's non-adjacent crossing repair on (its default, -1) or off; bound after ReadFile, since the
+    """Turn OCCT's repair of a wire's crossing edges on (its default, -1) or off; bound after ReadFile, since the
     transfer actor reads it then, and IGES's actor is shared by every reader of the process."""
     params = Resource_DataMapOfAsciiStringAsciiString()
     params.Bind(TCollection_AsciiString("FixShape.FixNonAdjacentIntersectingEdgesMode"),
@@ -62,11 +62,12 @@ def _crossing_repair(reader: XSControl_Reader, on: bool) -> None:
 
 
 def _transfer(reader: XSControl_Reader, parse_again: Callable[[], XSControl_Reader]) -> TopoDS_Shape:
-    """OCCT's transfer and shape healing, less its non-adjacent crossing repair unless a wire needs it.
+    """OCCT's transfer and shape healing, less its repair of a wire's crossing edges unless a face needs it.
 
     That repair rebuilds a face once per wire (O(wires^2): 10 s of a 1,600-hole plate's 12 s read) and changes
-    nothing where no two non-adjacent edges of a wire meet; when `crossing_faces` finds a wire whose edges do,
-    the file is transferred again with OCCT's default healing, so the shape is always the one OCCT's reader gives.
+    nothing where no edges of a face meet that should not; when `crossing_faces` finds a face where some do (in
+    one wire or, should a later repair have split the wire, in two), the file is transferred again with OCCT's
+    default healing, so the shape is always the one OCCT's reader gives.
     """
     _crossing_repair(reader, False)
     try:

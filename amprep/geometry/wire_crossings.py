@@ -1,9 +1,10 @@
-"""Find wires whose non-adjacent edges meet in their face's (u,v): the defect OCCT's FixSelfIntersectWire repairs.
+"""Find the edges that meet in a face's (u,v) where they should not: in one wire, or in two wires of the face.
 
 OCCT's STEP and IGES readers run ShapeFix_IntersectionTool::FixSelfIntersectWire on every wire of every face;
 before it looks at a wire it rebuilds the whole face through its re-shape context, so a face with W holes costs
-O(W^2) (a 1,600-hole plate: 10 s of a 12 s read). `cad.py` reads with that one repair off, asks `crossing_faces`
-whether any wire has what it would have repaired, and reads again with it on when one does.
+O(W^2) (a 1,600-hole plate: 10 s of a 12 s read). `cad.py` reads with that repair off, asks `crossing_faces`
+whether any face has edges it would have repaired, or edges of two wires that meet (what a crossing wire becomes
+if a later repair splits it), and reads again with OCCT's default healing when one does.
 """
 
 from __future__ import annotations
@@ -103,19 +104,64 @@ def wire_crosses(wire: TopoDS_Wire, face: TopoDS_Face) -> bool:
     return False
 
 
+def _box_union(curves: list[_Curve | None]) -> tuple[float, float, float, float]:
+    boxes = [c[3] for c in curves if c is not None]
+    if not boxes:
+        return (np.inf, np.inf, -np.inf, -np.inf)
+    b = np.array(boxes)
+    return (b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max())
+
+
+def overlapping_boxes(box: np.ndarray) -> list[tuple[int, int]]:
+    """Pairs (a, b) of (n, 4) boxes [umin, vmin, umax, vmax] that overlap, a sweep along u (empty: inf, -inf)."""
+    order = np.argsort(box[:, 0], kind="stable")
+    b = box[order]
+    n = len(b)
+    starts = np.arange(1, n + 1)
+    counts = np.maximum(np.searchsorted(b[:, 0], b[:, 2], side="right") - starts, 0)
+    i = np.repeat(np.arange(n), counts)
+    j = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(starts, counts)
+    keep = (b[i, 1] <= b[j, 3]) & (b[j, 1] <= b[i, 3])
+    return list(zip(order[i[keep]].tolist(), order[j[keep]].tolist()))
+
+
+def wires_cross(wires: list[TopoDS_Wire], face: TopoDS_Face) -> bool:
+    """True when an edge of one of the face's wires meets an edge of another in the face's (u,v).
+
+    FixIntersectingWires' test: pairs of wires whose boxes overlap, pairs of their distinct, non-degenerated
+    edges whose boxes overlap, intersected by Geom2dInt_GInter.
+    """
+    edges = []
+    for wire in wires:
+        data = ShapeExtend_WireData(wire)
+        edges.append([data.Edge(i) for i in range(1, data.NbEdges() + 1)])
+    curves = [[_pcurve_box(e, face) for e in es] for es in edges]
+    boxes = np.array([_box_union(cs) for cs in curves]).reshape(-1, 4)
+    for a, b in overlapping_boxes(boxes):
+        for ea, ca in zip(edges[a], curves[a]):
+            if ca is None:
+                continue
+            for eb, cb in zip(edges[b], curves[b]):
+                if cb is not None and not ea.IsSame(eb) and _overlap(ca[3], cb[3]) and _meet(ca, cb):
+                    return True
+    return False
+
+
 def crossing_faces(shape: TopoDS_Shape) -> list[int]:
-    """Indices (TopExp_Explorer order, repeats counted) of the faces with a wire for which `wire_crosses` holds."""
+    """Indices (TopExp_Explorer order, repeats counted) of the faces with a wire for which `wire_crosses` holds
+    or with two wires for which `wires_cross` does."""
     found = []
     faces = TopExp_Explorer(shape, TopAbs_FACE)
     k = 0
     while faces.More():
         face = TopoDS.Face_s(faces.Current())
-        wires = TopExp_Explorer(face, TopAbs_WIRE)
-        while wires.More():
-            if wire_crosses(TopoDS.Wire_s(wires.Current()), face):
-                found.append(k)
-                break
-            wires.Next()
+        wires = []
+        explorer = TopExp_Explorer(face, TopAbs_WIRE)
+        while explorer.More():
+            wires.append(TopoDS.Wire_s(explorer.Current()))
+            explorer.Next()
+        if any(wire_crosses(w, face) for w in wires) or (len(wires) > 1 and wires_cross(wires, face)):
+            found.append(k)
         faces.Next()
         k += 1
     return found
