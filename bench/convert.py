@@ -311,7 +311,8 @@ def write_tables(rows: list[dict], name: str = "bench_convert", argv: str = "") 
         f"# Conversion benchmark\n\nMade by `python bench/convert.py {argv}` (one child process per cell, end to end: "
         "read → mesh → write STL; closedness from the written STL with identical-coordinate vertices; for OCCT the "
         "seconds of its STEP read and of BRepMesh alone are given too, since the speed target counts parts whose "
-        "meshing takes over a second). "
+        "meshing takes over a second; OCCT reads with its own reader and default healing, amprep with one quadratic "
+        "repair skipped where its check finds nothing to repair, see README, Convert). "
         "`max dev / tol` is the worst sampled chordal error over all faces divided by the tolerance (n/a for "
         "cascadio and gmsh, whose output carries no (u,v)). gmsh has no chord tolerance: its size comes from "
         "curvature with elements per 2π set so a 5 mm radius gets the tolerance as sagitta.\n\n" + table + "\n")
