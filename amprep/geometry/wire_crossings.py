@@ -2,7 +2,7 @@
 
 OCCT's STEP and IGES readers run ShapeFix_IntersectionTool::FixSelfIntersectWire on every wire of every face;
 before it looks at a wire it rebuilds the whole face through its re-shape context, so a face with W holes costs
-O(W^2) (a 1,600-hole plate: 10 s of a 12 s read). `cad.py` reads with that repair off, asks `crossing_faces`
+O(W^2) (a 1,600-hole plate: 10–17 s of a 12–20 s read). `cad.py` reads with that repair off, asks `crossing_faces`
 whether any face has edges it would have repaired, or edges of two wires that meet (what a crossing wire becomes
 if a later repair splits it), and reads again with OCCT's default healing when one does.
 """
