@@ -21,12 +21,13 @@ from OCP.IntRes2d import IntRes2d_Domain
 from OCP.Precision import Precision
 from OCP.ShapeExtend import ShapeExtend_WireData
 from OCP.TopAbs import TopAbs_FACE, TopAbs_WIRE
-from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape, TopoDS_Wire
+
+from .tessellate import explore
 
 _TOL = 1.0e-10  # the intersection tolerance FixSelfIntersectWire uses
 _Curve = tuple[Geom2dAdaptor_Curve, float, float, tuple[float, float, float, float]]
-_FEW = 16  # wires with at most this many edges test their pairs one by one, longer ones filter boxes in numpy
+_FEW = 16  # wires with at most this many edges test all their pairs, longer ones only those whose boxes overlap
 
 
 def _pcurve_box(edge: TopoDS_Edge, face: TopoDS_Face) -> _Curve | None:
@@ -63,53 +64,7 @@ def _pairs(n: int) -> tuple[tuple[int, int], ...]:
     return tuple((i, j) for i in range(n) for j in range(i + 2, n) if (i, j) != (0, n - 1))
 
 
-def _box_pairs(curves: list[_Curve | None]) -> list[tuple[int, int]]:
-    """`_pairs` of a long wire whose edges both have a pcurve and whose boxes overlap, found in numpy."""
-    n = len(curves)
-    live = np.array([c is not None for c in curves])
-    box = np.array([c[3] if c is not None else (np.inf, np.inf, -np.inf, -np.inf) for c in curves])
-    i, j = np.triu_indices(n, 2)
-    keep = ~((i == 0) & (j == n - 1)) & live[i] & live[j]
-    keep &= (box[i, 0] <= box[j, 2]) & (box[j, 0] <= box[i, 2]) & (box[i, 1] <= box[j, 3]) & (box[j, 1] <= box[i, 3])
-    return list(zip(i[keep].tolist(), j[keep].tolist()))
-
-
-def wire_crosses(wire: TopoDS_Wire, face: TopoDS_Face) -> bool:
-    """True when two non-adjacent, distinct, non-degenerated edges of the wire meet in the face's (u,v).
-
-    The pairs are FixSelfIntersectWire's (`_pairs`); a pair is intersected only when its (u,v) boxes overlap.
-    A wire of fewer than 4 edges has no such pair.
-    """
-    data = ShapeExtend_WireData(wire)
-    n = data.NbEdges()
-    if n < 4:
-        return False
-    edges = [data.Edge(i) for i in range(1, n + 1)]
-    curves: list[_Curve | None] = [None] * n
-    if n > _FEW:
-        curves = [_pcurve_box(e, face) for e in edges]
-        pairs = _box_pairs(curves)
-    else:
-        pairs = list(_pairs(n))
-    seen = [n > _FEW] * n
-    for a, b in pairs:
-        if edges[a].IsSame(edges[b]):
-            continue
-        for k in (a, b):
-            if not seen[k]:
-                curves[k], seen[k] = _pcurve_box(edges[k], face), True
-        ca, cb = curves[a], curves[b]
-        if ca is not None and cb is not None and _overlap(ca[3], cb[3]) and _meet(ca, cb):
-            return True
-    return False
-
-
-def _box_union(curves: list[_Curve | None]) -> tuple[float, float, float, float]:
-    boxes = [c[3] for c in curves if c is not None]
-    if not boxes:
-        return (np.inf, np.inf, -np.inf, -np.inf)
-    b = np.array(boxes)
-    return (b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max())
+_EMPTY = (np.inf, np.inf, -np.inf, -np.inf)  # the box of no pcurve: it overlaps nothing
 
 
 def overlapping_boxes(box: np.ndarray) -> list[tuple[int, int]]:
@@ -125,43 +80,79 @@ def overlapping_boxes(box: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(order[i[keep]].tolist(), order[j[keep]].tolist()))
 
 
+class _Wire:
+    """A wire's edges in its order (ShapeExtend_WireData's, as OCCT's repairs take them) and their pcurves on the
+    face, each read once, when first asked for."""
+
+    def __init__(self, wire: TopoDS_Wire, face: TopoDS_Face) -> None:
+        data = ShapeExtend_WireData(wire)
+        self.face = face
+        self.edges = [data.Edge(i) for i in range(1, data.NbEdges() + 1)]
+        self._curves: dict[int, _Curve | None] = {}
+
+    def curve(self, k: int) -> _Curve | None:
+        if k not in self._curves:
+            self._curves[k] = _pcurve_box(self.edges[k], self.face)
+        return self._curves[k]
+
+    def boxes(self) -> np.ndarray:
+        """(n, 4) every edge's (u,v) box (_EMPTY without a pcurve)."""
+        return np.array([c[3] if c is not None else _EMPTY
+                         for c in map(self.curve, range(len(self.edges)))], float).reshape(-1, 4)
+
+
+def _edges_meet(w1: _Wire, k1: int, w2: _Wire, k2: int) -> bool:
+    """True when the two edges are distinct, both have a pcurve, their boxes overlap and the pcurves meet."""
+    if w1.edges[k1].IsSame(w2.edges[k2]):
+        return False
+    c1, c2 = w1.curve(k1), w2.curve(k2)
+    return c1 is not None and c2 is not None and _overlap(c1[3], c2[3]) and _meet(c1, c2)
+
+
+def _crosses_itself(w: _Wire) -> bool:
+    n = len(w.edges)
+    if n < 4:
+        return False
+    if n <= _FEW:
+        pairs = list(_pairs(n))
+    else:
+        pairs = [(a, b) if a < b else (b, a) for a, b in overlapping_boxes(w.boxes())]
+        pairs = [(a, b) for a, b in pairs if b >= a + 2 and (a, b) != (0, n - 1)]
+    return any(_edges_meet(w, a, w, b) for a, b in pairs)
+
+
+def _wires_meet(ws: list[_Wire]) -> bool:
+    boxes = [w.boxes() for w in ws]
+    union = np.array([(*b[:, :2].min(axis=0, initial=np.inf), *b[:, 2:].max(axis=0, initial=-np.inf)) for b in boxes])
+    return any(_edges_meet(ws[a], ka, ws[b], kb)
+               for a, b in overlapping_boxes(union.reshape(-1, 4))
+               for ka in range(len(ws[a].edges)) for kb in range(len(ws[b].edges)))
+
+
+def wire_crosses(wire: TopoDS_Wire, face: TopoDS_Face) -> bool:
+    """True when two non-adjacent, distinct, non-degenerated edges of the wire meet in the face's (u,v).
+
+    The pairs are FixSelfIntersectWire's (`_pairs`); a pair is intersected only when its (u,v) boxes overlap.
+    A wire of fewer than 4 edges has no such pair.
+    """
+    return _crosses_itself(_Wire(wire, face))
+
+
 def wires_cross(wires: list[TopoDS_Wire], face: TopoDS_Face) -> bool:
     """True when an edge of one of the face's wires meets an edge of another in the face's (u,v).
 
     FixIntersectingWires' test: pairs of wires whose boxes overlap, pairs of their distinct, non-degenerated
     edges whose boxes overlap, intersected by Geom2dInt_GInter.
     """
-    edges = []
-    for wire in wires:
-        data = ShapeExtend_WireData(wire)
-        edges.append([data.Edge(i) for i in range(1, data.NbEdges() + 1)])
-    curves = [[_pcurve_box(e, face) for e in es] for es in edges]
-    boxes = np.array([_box_union(cs) for cs in curves]).reshape(-1, 4)
-    for a, b in overlapping_boxes(boxes):
-        for ea, ca in zip(edges[a], curves[a]):
-            if ca is None:
-                continue
-            for eb, cb in zip(edges[b], curves[b]):
-                if cb is not None and not ea.IsSame(eb) and _overlap(ca[3], cb[3]) and _meet(ca, cb):
-                    return True
-    return False
+    return _wires_meet([_Wire(w, face) for w in wires])
 
 
 def crossing_faces(shape: TopoDS_Shape) -> list[int]:
     """Indices (TopExp_Explorer order, repeats counted) of the faces with a wire for which `wire_crosses` holds
-    or with two wires for which `wires_cross` does."""
+    or with two wires for which `wires_cross` does (each edge's pcurve read once for both)."""
     found = []
-    faces = TopExp_Explorer(shape, TopAbs_FACE)
-    k = 0
-    while faces.More():
-        face = TopoDS.Face_s(faces.Current())
-        wires = []
-        explorer = TopExp_Explorer(face, TopAbs_WIRE)
-        while explorer.More():
-            wires.append(TopoDS.Wire_s(explorer.Current()))
-            explorer.Next()
-        if any(wire_crosses(w, face) for w in wires) or (len(wires) > 1 and wires_cross(wires, face)):
+    for k, face in enumerate(explore(shape, TopAbs_FACE, TopoDS.Face_s)):
+        ws = [_Wire(w, face) for w in explore(face, TopAbs_WIRE, TopoDS.Wire_s)]
+        if any(_crosses_itself(w) for w in ws) or (len(ws) > 1 and _wires_meet(ws)):
             found.append(k)
-        faces.Next()
-        k += 1
     return found
