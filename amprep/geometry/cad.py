@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from OCP.BRepTools import BRepTools
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.IGESControl import IGESControl_Reader
 from OCP.Interface import Interface_Static
+from OCP.Message import Message
 from OCP.Resource import Resource_DataMapOfAsciiStringAsciiString
 from OCP.STEPControl import STEPControl_Reader
 from OCP.TCollection import TCollection_AsciiString
@@ -87,9 +89,27 @@ def _transfer(reader: XSControl_Reader, parse_again: Callable[[], XSControl_Read
     return reader.OneShape()
 
 
+@contextmanager
+def occt_messages_muted() -> Iterator[None]:
+    """OCCT's default messenger without its printers inside the block (its readers print progress lines such as
+    IGES's "Total number of loaded entities" on stdout); the printers are put back after."""
+    messenger = Message.DefaultMessenger_s()
+    printers = messenger.Printers()
+    held = [printers.Value(i) for i in range(1, printers.Length() + 1)]
+    for printer in held:
+        messenger.RemovePrinter(printer)
+    try:
+        yield
+    finally:
+        for printer in held:
+            messenger.AddPrinter(printer)
+
+
 def _parsed(reader: XSControl_Reader, path: Path, name: str) -> XSControl_Reader:
     Interface_Static.SetCVal_s("xstep.cascade.unit", "MM")
-    if reader.ReadFile(str(path)) != IFSelect_RetDone:
+    with occt_messages_muted():
+        status = reader.ReadFile(str(path))
+    if status != IFSelect_RetDone:
         raise AmprepError(ErrorCode.UNREADABLE_CAD, f"the {name} file could not be parsed")
     return reader
 

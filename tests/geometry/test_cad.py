@@ -56,3 +56,22 @@ def test_corrupt_cad_has_a_stable_code(tmp_path, content, code):
     with pytest.raises(AmprepError) as err:
         read_cad(p)
     assert err.value.code in (code, ErrorCode.EMPTY_MODEL)
+
+
+def test_reading_iges_prints_nothing_and_keeps_occt_printers(capfd):
+    from OCP.IGESControl import IGESControl_Reader
+    from OCP.Message import Message, Message_PrinterOStream
+
+    messenger = Message.DefaultMessenger_s()
+    added = Message_PrinterOStream()
+    messenger.AddPrinter(added)  # a printer to stdout, whatever earlier tests did to the default messenger
+    try:
+        IGESControl_Reader().ReadFile(str(corpus("bspline_45_faces.iges")))  # control: OCCT's reader prints
+        assert "loaded entities" in capfd.readouterr().out
+        m = read_cad(corpus("bspline_45_faces.iges"))
+        assert len(m.faces) == 45
+        assert capfd.readouterr().out == ""
+        printers = messenger.Printers()
+        assert any(printers.Value(i) is added or printers.Value(i) == added for i in range(1, printers.Length() + 1))
+    finally:
+        messenger.RemovePrinter(added)
