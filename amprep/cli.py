@@ -366,6 +366,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"amprep: error [{ErrorCode.CANCELLED.value}]: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug of ours: one line with a code, the traceback only when asked for
+        if os.environ.get("AMPREP_DEBUG"):
+            raise
+        print(f"amprep: error [{ErrorCode.INTERNAL_ERROR.value}]: {type(exc).__name__}: {exc} "
+              "(a bug in amprep: AMPREP_DEBUG=1 shows the traceback; please report it with the input)", file=sys.stderr)
+        return EXIT_ERROR
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from OCP.BinTools import BinTools
-from OCP.BRep import BRep_Builder
+from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
 from OCP.BRepTools import BRepTools
 from OCP.IFSelect import IFSelect_RetDone
@@ -19,14 +19,15 @@ from OCP.Resource import Resource_DataMapOfAsciiStringAsciiString
 from OCP.STEPControl import STEPControl_Reader
 from OCP.TCollection import TCollection_AsciiString
 from OCP.TColStd import TColStd_SequenceOfAsciiString
-from OCP.TopAbs import TopAbs_FACE, TopAbs_SHELL, TopAbs_SOLID
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SHELL, TopAbs_SOLID
 from OCP.TopExp import TopExp
-from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
-from OCP.TopTools import TopTools_IndexedMapOfShape
+from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Face, TopoDS_Shape
+from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 from OCP.XSControl import XSControl_Reader
 
 from .errors import AmprepError, ErrorCode
 from .formats import sniff_path
+from .tessellate import explore
 from .wire_crossings import crossing_faces
 
 
@@ -156,6 +157,43 @@ def _sew(shape: TopoDS_Shape, tolerance: float) -> TopoDS_Shape:
     return sewn if not sewn.IsNull() else shape
 
 
+#: gap (mm) within which sewing joins two loose faces' edges
+SEW_TOLERANCE = 1e-3
+
+
+def free_edge_count(shape: TopoDS_Shape) -> int:
+    """Edges of a shape bounding one face only (degenerated edges, the poles, not counted)."""
+    faces_of = TopTools_IndexedDataMapOfShapeListOfShape()
+    TopExp.MapShapesAndAncestors_s(shape, TopAbs_EDGE, TopAbs_FACE, faces_of)
+    return sum(1 for i in range(1, faces_of.Extent() + 1)
+               if faces_of.FindFromIndex(i).Extent() == 1 and not BRep_Tool.Degenerated_s(TopoDS.Edge_s(faces_of.FindKey(i))))
+
+
+def sew_loose_faces(shape: TopoDS_Shape, tolerance: float = SEW_TOLERANCE) -> tuple[TopoDS_Shape, bool]:
+    """(shape, sewn): the faces outside any solid (in open shells, one shell per face as some STEP surface models
+    have, or in no shell, as IGES has them) sewn together when they are two or more, have a surface and leave
+    edges free; solids are kept as they are. Unchanged, False, when there is nothing to sew."""
+    loose = explore(shape, TopAbs_SHELL, TopoDS.Shell_s, avoid=TopAbs_SOLID)
+    loose += explore(shape, TopAbs_FACE, TopoDS.Face_s, avoid=TopAbs_SHELL)
+    builder = BRep_Builder()
+    part = TopoDS_Compound()
+    builder.MakeCompound(part)
+    for s in loose:
+        builder.Add(part, s)
+    faces = explore(part, TopAbs_FACE, TopoDS.Face_s)
+    if len(faces) < 2 or any(BRep_Tool.Surface_s(f) is None for f in faces) or free_edge_count(part) == 0:
+        return shape, False
+    solids = explore(shape, TopAbs_SOLID, TopoDS.Solid_s)
+    if not solids:
+        return _sew(part, tolerance), True
+    out = TopoDS_Compound()
+    builder.MakeCompound(out)
+    for s in solids:
+        builder.Add(out, s)
+    builder.Add(out, _sew(part, tolerance))
+    return out, True
+
+
 def model_from_shape(shape: TopoDS_Shape, fmt: str = "brep", units: str = "none", sewn: bool = False) -> CadModel:
     """Index the faces and solids of a shape (faces in TopExp order; an assembly's instances are distinct)."""
     if shape is None or shape.IsNull():
@@ -195,10 +233,8 @@ def read_shape(path: str | Path, fmt: str) -> tuple[TopoDS_Shape, str]:
 
 
 def read_cad(path: str | Path, fmt: str | None = None) -> CadModel:
-    """Read a STEP, IGES or BREP file into a CadModel in mm; loose faces (no shell) are sewn into shells."""
+    """Read a STEP, IGES or BREP file into a CadModel in mm; faces outside solids are sewn (sew_loose_faces)."""
     fmt = fmt or sniff_path(Path(path))
     shape, units = read_shape(path, fmt)
-    sewn = False
-    if _indexed(shape, TopAbs_SHELL).Extent() == 0 and _indexed(shape, TopAbs_FACE).Extent() > 1:
-        shape, sewn = _sew(shape, 1e-3), True
+    shape, sewn = sew_loose_faces(shape)
     return model_from_shape(shape, fmt, units, sewn)

@@ -259,10 +259,11 @@ class Topology:
         return known
 
 
-def explore(shape: TopoDS_Shape, kind, cast) -> list:  # type: ignore[no-untyped-def,type-arg]
-    """The sub-shapes of one kind in TopExp order, oriented as they sit in `shape`, cast by `cast`."""
+def explore(shape: TopoDS_Shape, kind, cast, avoid=None) -> list:  # type: ignore[no-untyped-def,type-arg]
+    """The sub-shapes of one kind in TopExp order, oriented as they sit in `shape`, cast by `cast` (`avoid`: a
+    kind whose sub-shapes are not entered, e.g. the shells outside solids)."""
     out = []
-    exp = TopExp_Explorer(shape, kind)
+    exp = TopExp_Explorer(shape, kind) if avoid is None else TopExp_Explorer(shape, kind, avoid)
     while exp.More():
         out.append(cast(exp.Current()))
         exp.Next()

@@ -36,7 +36,10 @@ def triangulate_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | 
     """(t, 3) constrained Delaunay triangles of points (n, 2) and segments (s, 2), nothing added on a segment, the
     parts holding a hole point (h, 2) and outside the segments removed. Triangle crashes the process on two equal
     points or a hole point outside the convex hull: equal or non-finite points raise meshing_failed, hole points
-    outside are dropped (the outside is removed anyway); segments crossing raise meshing_failed."""
+    outside are dropped (the outside is removed anyway); segments crossing or fewer than three points raise
+    meshing_failed."""
+    if len(pts) < 3:
+        raise AmprepError(ErrorCode.MESHING_FAILED, f"a face's (u,v) boundary has {len(pts)} point(s)")
     if not np.isfinite(pts).all():
         raise AmprepError(ErrorCode.MESHING_FAILED, "a face's (u,v) boundary has non-finite points")
     if len(unique_points(pts)) != len(pts):

@@ -75,3 +75,86 @@ def test_reading_iges_prints_nothing_and_keeps_occt_printers(capfd):
         assert any(printers.Value(i) is added or printers.Value(i) == added for i in range(1, printers.Length() + 1))
     finally:
         messenger.RemovePrinter(added)
+
+
+def _one_shell_per_face(solid):
+    """A compound of open shells, one per face of `solid`, each face a copy with its own edges (as some STEP surface
+    models store a part: nothing shared, every edge free)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Shell
+
+    from amprep.geometry.tessellate import explore
+
+    b = BRep_Builder()
+    comp = TopoDS_Compound()
+    b.MakeCompound(comp)
+    for face in explore(solid, TopAbs_FACE, TopoDS.Face_s):
+        shell = TopoDS_Shell()
+        b.MakeShell(shell)
+        b.Add(shell, TopoDS.Face_s(BRepBuilderAPI_Copy(face).Shape()))
+        b.Add(comp, shell)
+    return comp
+
+
+def _write_step(shape, path):
+    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
+
+    w = STEPControl_Writer()
+    w.Transfer(shape, STEPControl_AsIs)
+    w.Write(str(path))
+    return path
+
+
+def test_step_surface_model_with_a_shell_per_face_is_sewn_closed(tmp_path):
+    """A block with a through hole stored as 10 one-face shells (a real IDF part library's SOT23.stp is such a file,
+    its IGES twin loose faces): the faces outside solids are sewn, as IGES faces are, and the part meshes closed."""
+    import cadquery as cq
+    from OCP.TopAbs import TopAbs_SHELL
+
+    from amprep.geometry.cad import free_edge_count, read_shape
+    from amprep.geometry.checks import check_mesh, manifold3d_accepts
+    from amprep.geometry.mesher import mesh_model
+    from amprep.geometry.tessellate import MeshParams
+
+    block = cq.Workplane("XY").box(20, 12, 6).faces(">Z").workplane().hole(5).val().wrapped
+    path = _write_step(_one_shell_per_face(block), tmp_path / "shells.step")
+    raw, _ = read_shape(path, "step")
+    assert _indexed_count(raw, TopAbs_SHELL) == 7 and free_edge_count(raw) > 0  # the control: all apart as stored
+    m = read_cad(path)
+    assert m.sewn and m.solids == 0 and len(m.faces) == 7 and free_edge_count(m.shape) == 0
+    r = mesh_model(m, MeshParams(tolerance=0.05))
+    c = check_mesh(r.mesh)
+    assert c.closed and c.boundary_edges == 0 and manifold3d_accepts(r.mesh) and r.max_error <= 0.05
+
+
+def test_loose_faces_are_sewn_and_solids_beside_them_kept(tmp_path):
+    """A solid and, beside it, a surface model (one-face shells): the loose faces are sewn among themselves, the
+    solid is kept as it is; two solids alone (an assembly) are never sewn."""
+    import cadquery as cq
+    from OCP.BRep import BRep_Builder
+    from OCP.TopoDS import TopoDS_Compound
+
+    from amprep.geometry.cad import free_edge_count
+
+    solid = cq.Workplane("XY").box(10, 10, 10).val().wrapped
+    loose = _one_shell_per_face(cq.Workplane("XY").cylinder(8, 3).translate((30, 0, 0)).val().wrapped)
+    b = BRep_Builder()
+    comp = TopoDS_Compound()
+    b.MakeCompound(comp)
+    b.Add(comp, solid)
+    b.Add(comp, loose)
+    m = read_cad(_write_step(comp, tmp_path / "mixed.step"))
+    assert m.sewn and m.solids == 1 and len(m.faces) == 9 and free_edge_count(m.shape) == 0
+    assert sum(s == 0 for s in m.face_solid) == 6
+    assert not read_cad(corpus("as1_assembly_ap214.stp")).sewn
+
+
+def _indexed_count(shape, kind):
+    from OCP.TopExp import TopExp
+    from OCP.TopTools import TopTools_IndexedMapOfShape
+
+    m = TopTools_IndexedMapOfShape()
+    TopExp.MapShapes_s(shape, kind, m)
+    return m.Extent()

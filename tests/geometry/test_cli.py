@@ -109,3 +109,18 @@ def test_large_torus_faces_are_ours_unless_occt_large_faces(tmp_path):
         assert summary["meshing"]["fallback_faces"] == ({} if flag else {"0": "large_curved"})
         counts[bool(flag)] = read_stl(out).n_triangles
     assert counts[False] < 0.9 * counts[True]
+
+
+def test_a_bug_of_ours_is_one_line_internal_error_exit_2(tmp_path):
+    """An unexpected exception (forced here by replacing convert with one that divides by zero) is one line with
+    the internal_error code and exit status 2; AMPREP_DEBUG=1 shows the traceback."""
+    code = ("import sys, amprep.geometry.convert as c\n"
+            "c.convert = lambda *a, **k: 1 / 0\n"
+            "from amprep.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    args = [sys.executable, "-c", code, "convert", str(corpus("voron_vhb_din_mount.step")), "-o", str(tmp_path / "o.stl")]
+    r = subprocess.run(args, capture_output=True, text=True, timeout=120)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "[internal_error]" in lines[0] and "ZeroDivisionError" in lines[0]
+    r = subprocess.run(args, capture_output=True, text=True, timeout=120, env={**os.environ, "AMPREP_DEBUG": "1"})
+    assert r.returncode != 0 and "Traceback" in r.stderr
