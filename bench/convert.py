@@ -251,7 +251,12 @@ def main() -> None:
     args = ap.parse_args()
     if args.child:
         tool, path, tol, out = args.child
-        print(json.dumps(child(tool, path, float(tol), out)))
+        from amprep.geometry.errors import AmprepError
+
+        try:
+            print(json.dumps(child(tool, path, float(tol), out)))
+        except AmprepError as exc:  # refused by amprep code (amprep, or the checks every output goes through)
+            print(json.dumps({"error": exc.code.value}))
         return
     tools = args.tools.split(",")
     tmp = Path(tempfile.mkdtemp(prefix="amprep-bench-"))
