@@ -19,9 +19,20 @@ from .forked import Forked
 from .mesher import brepmesh_model
 from .tessellate import MeshParams, occt_pool_untouched
 
-#: kernels are warmed only when the child has not finished within this many seconds: a file that reads and meshes
-#: faster is small, and may never need them (nor one the child has finished by the time numba is imported)
-WARM_AFTER = 0.15
+#: a file this large takes the child over ~0.5 s to read (STEP parses at 1.5–5 MB/s here), which hides numba's
+#: import and first dispatch (~0.65 s), and its part is large: the kernels are warmed at once
+WARM_NOW_BYTES = 1_500_000
+#: a smaller file's kernels are warmed only when the child is still at work after this many seconds, i.e. BRepMesh
+#: is making many triangles. Warming costs the parent ~0.35 s of numba import it cannot stop: a part whose child
+#: ends before that is over pays it for kernels it rarely needs (a 0.6 MB part library STEP, read and meshed in
+#: 0.3 s, took 0.55 s with the warm started at 0.15 s, 0.34 s without)
+WARM_AFTER = 0.5
+
+
+def warm_delay(path: str | Path) -> float:
+    """Seconds to let the reading child work before warming the kernels: 0 for a file of WARM_NOW_BYTES or more,
+    WARM_AFTER for a smaller one."""
+    return 0.0 if Path(path).stat().st_size >= WARM_NOW_BYTES else WARM_AFTER
 
 
 def read_and_mesh(path: str | Path, fmt: str, params: MeshParams) -> tuple[CadModel, float]:
@@ -39,7 +50,7 @@ def _child(path: str, fmt: str, params: MeshParams) -> tuple[bytes, str, bool, f
 
 def read_and_mesh_ahead(path: str | Path, fmt: str, params: MeshParams) -> tuple[CadModel, float]:
     """read_and_mesh, in a forked child while this process warms the kernels (when they are not loaded yet and a
-    second core exists; in this process otherwise). OCCT's parallel meshing runs in the child only when this
+    second core exists, at once for a large file, after WARM_AFTER for a small one; in this process otherwise). OCCT's parallel meshing runs in the child only when this
     process never started OCCT's thread pool. A child that dies (OCCT crashing on the file) is unreadable_cad."""
     if kernels_loaded():
         return read_and_mesh(path, fmt, params)
@@ -48,7 +59,7 @@ def read_and_mesh_ahead(path: str | Path, fmt: str, params: MeshParams) -> tuple
                  died=(ErrorCode.UNREADABLE_CAD, f"OCCT crashed reading or meshing the {fmt.upper()} file"))
     if not job.forked:
         return read_and_mesh(path, fmt, params)
-    if not job.ready(WARM_AFTER):
+    if not job.ready(warm_delay(path)):
         warm_kernels(stop=job.ready)
     data, units, sewn, tol = job.result()
     shape = TopoDS_Shape()

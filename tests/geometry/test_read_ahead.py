@@ -135,3 +135,22 @@ def test_warming_stops_after_importing_numba_when_the_file_is_read_already(stop,
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == [loaded, "True"]
+
+
+@needs_fork
+def test_kernels_are_warmed_at_once_for_a_large_file_later_for_a_small_one(monkeypatch):
+    """A large STEP (CTC-02, 3.4 MB) reads for longer than numba takes to load: the warm starts as the child starts.
+    A small file's child is given WARM_AFTER first (numba's import, which cannot be stopped, would outlast it)."""
+    import time
+
+    assert read_ahead.warm_delay(corpus("nist_ctc02_ap242.stp")) == 0.0
+    assert read_ahead.warm_delay(corpus("voron_vhb_din_mount.step")) == read_ahead.WARM_AFTER >= 0.5
+    monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)
+    calls = []
+    start = time.monotonic()
+    monkeypatch.setattr(read_ahead, "warm_kernels", lambda stop: calls.append((time.monotonic() - start, stop())))
+    read_ahead.read_and_mesh_ahead(corpus("nist_ctc02_ap242.stp"), "step", MeshParams(tolerance=0.1))
+    assert len(calls) == 1 and calls[0][0] < 0.2 and calls[0][1] is False  # at once, the child still reading
+    calls.clear()
+    read_ahead.read_and_mesh_ahead(corpus("cq_cube_cylinder_colors.step"), "step", MeshParams(tolerance=0.1))
+    assert calls == []  # read and meshed well within WARM_AFTER
