@@ -25,7 +25,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 from OCP.XSControl import XSControl_Reader
 
-from .errors import AmprepError, ErrorCode
+from .errors import AmprepError, ErrorCode, is_occt_failure
 from .formats import sniff_path
 from .tessellate import explore
 from .wire_crossings import crossing_faces
@@ -80,7 +80,9 @@ def _transfer(reader: XSControl_Reader, parse_again: Callable[[], XSControl_Read
     shape = reader.OneShape()
     try:
         clean = shape.IsNull() or not crossing_faces(shape)
-    except Exception:  # noqa: BLE001 - an OCCT failure in the check: let OCCT's own repair decide
+    except Exception as exc:  # noqa: BLE001 - an OCCT failure in the check: let OCCT's own repair decide
+        if not is_occt_failure(exc):
+            raise
         clean = False
     if clean:
         return shape
@@ -135,7 +137,9 @@ def _read_brep(path: Path) -> tuple[TopoDS_Shape, str]:
         binary = fh.read(64).lstrip().startswith(b"Open CASCADE Topology")
     try:
         ok = BinTools.Read_s(shape, str(path)) if binary else BRepTools.Read_s(shape, str(path), BRep_Builder())
-    except Exception:  # OCCT raises Standard_Failure subclasses on corrupt input
+    except Exception as exc:  # noqa: BLE001 - OCCT raises Standard_Failure subclasses on corrupt input
+        if not is_occt_failure(exc):
+            raise
         ok = False
     if not ok:
         raise AmprepError(ErrorCode.UNREADABLE_CAD, "the BREP file could not be parsed")
@@ -226,6 +230,8 @@ def read_shape(path: str | Path, fmt: str) -> tuple[TopoDS_Shape, str]:
     except AmprepError:
         raise
     except Exception as exc:  # noqa: BLE001 - OCCT failures surface as assorted exception types
+        if not is_occt_failure(exc):
+            raise
         raise AmprepError(ErrorCode.UNREADABLE_CAD, f"OCCT could not read the {fmt.upper()} file ({type(exc).__name__})") from None
     if shape.IsNull():
         raise AmprepError(ErrorCode.EMPTY_MODEL, f"the {fmt.upper()} file holds no shape OCCT can transfer")

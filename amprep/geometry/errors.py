@@ -42,3 +42,10 @@ class AmprepError(Exception):
 
     def __str__(self) -> str:
         return f"{self.code.value}: {self.message}"
+
+
+def is_occt_failure(exc: BaseException) -> bool:
+    """True for an exception OCCT raised through OCP (its Standard_Failure family, classes of OCP's modules, or
+    pybind11's RuntimeError for another C++ exception): what the library turns into a stable code. Anything else
+    (a job's time limit or a cancellation arriving while OCCT ran, a bug) must pass through unchanged."""
+    return type(exc).__module__.startswith("OCP") or type(exc) is RuntimeError

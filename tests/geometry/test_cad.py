@@ -158,3 +158,37 @@ def _indexed_count(shape, kind):
     m = TopTools_IndexedMapOfShape()
     TopExp.MapShapes_s(shape, kind, m)
     return m.Extent()
+
+
+def test_only_occt_failures_become_unreadable_cad(monkeypatch):
+    """OCCT's exceptions (OCP's classes, pybind11's RuntimeError) become unreadable_cad; anything else raised while
+    a file is read — a job's soft time limit arrives as an exception at the first Python line after OCCT returns —
+    passes unchanged (it was reported as unreadable_cad, and the job failed with the wrong code)."""
+    from OCP.gp import gp_Dir
+
+    from amprep.geometry import cad
+    from amprep.geometry.errors import is_occt_failure
+
+    with pytest.raises(Exception) as occt:
+        gp_Dir(0, 0, 0)
+    assert is_occt_failure(occt.value) and is_occt_failure(RuntimeError("c++"))
+
+    class TimeLimit(Exception):
+        pass
+
+    assert not is_occt_failure(TimeLimit()) and not is_occt_failure(ValueError())
+
+    def interrupted(path):
+        raise TimeLimit()
+
+    monkeypatch.setattr(cad, "_read_step", interrupted)
+    with pytest.raises(TimeLimit):
+        cad.read_shape(corpus("cq_cube_cylinder_colors.step"), "step")
+
+    def occt_fails(path):
+        gp_Dir(0, 0, 0)
+
+    monkeypatch.setattr(cad, "_read_step", occt_fails)
+    with pytest.raises(AmprepError) as err:
+        cad.read_shape(corpus("cq_cube_cylinder_colors.step"), "step")
+    assert err.value.code == ErrorCode.UNREADABLE_CAD
