@@ -62,7 +62,12 @@ def main() -> None:
     ap.add_argument("--tolerances", default="0.1,0.01")
     ap.add_argument("--timeout", type=float, default=300)
     ap.add_argument("--name", default="bench_real_parts")
+    ap.add_argument("--from-log", help="write the tables from the JSON lines a run printed (e.g. one stopped early)")
     args = ap.parse_args()
+    if args.from_log:
+        rows = [json.loads(line) for line in Path(args.from_log).read_text().splitlines() if line.startswith("{")]
+        write_tables(rows, args, len({r["part"] for r in rows}), complete=False)
+        return
     tmp = Path(tempfile.mkdtemp(prefix="amprep-real-"))
     parts = package_parts(args.package, tmp)
     rows = []
@@ -86,7 +91,7 @@ def _summary(rows: list[dict], tool: str) -> dict:
             "errors": sorted({r.get("error", "") for r in mine if "seconds" not in r})}
 
 
-def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int) -> None:
+def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, complete: bool = True) -> None:
     docs = ROOT / "docs"
     fields = ["part", "tolerance", "tool", "seconds", "triangles", "closed", "boundary", "nonmanifold", "degenerate",
               "deviation_ratio", "peak_rss_mb", "error"]
@@ -105,7 +110,7 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int) -> No
     lines = [f"# Real parts outside the corpus: {args.package}", "",
              f"Made by `python bench/real_parts.py --package {args.package} --tolerances {args.tolerances}`: every STEP, "
              f"IGES and BREP file the Debian package ships and the B-rep of each FreeCAD document in it, each once by "
-             f"content ({n_parts} parts), converted end to end in a child process per cell by amprep and by the bare "
+             f"content ({n_parts} parts{'' if complete else ', those a run stopped early had reached, from its log'}), converted end to end in a child process per cell by amprep and by the bare "
              "OCCT pipeline (its reader, BRepMesh Delabella, StlAPI_Writer). `closed`: every edge of the written STL "
              "shared by two triangles, consistently oriented; `within`: worst sampled chordal error ≤ the tolerance.",
              "", "| tool | cells | converted | closed | within tolerance | errors |", "|---|---|---|---|---|---|"]
@@ -118,7 +123,7 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int) -> No
                   f"Triangles amprep / OCCT: median {ratio[len(ratio) // 2]:.2f}, range {ratio[0]:.2f}–{ratio[-1]:.2f} "
                   "(more where OCCT left faces unmeshed, fewer where it over-refines)."]
     if open_for_us:
-        lines += ["", "Open from amprep (the B-rep itself leaves edges free, see the notes of `amprep convert`):", ""]
+        lines += ["", "Open from amprep (`amprep convert` says why in its notes: surfaces that stay open once sewn, or faces it could not mesh):", ""]
         lines += [f"- {k[0]} at {k[1]:g} mm: {c['amprep']['boundary']} boundary edges "
                   f"(OCCT: {c['occt-delabella']['boundary']} boundary, {c['occt-delabella']['nonmanifold']} non-manifold)"
                   for k, c in open_for_us]
