@@ -110,9 +110,7 @@ def occt_messages_muted() -> Iterator[None]:
 
 def _parsed(reader: XSControl_Reader, path: Path, name: str) -> XSControl_Reader:
     Interface_Static.SetCVal_s("xstep.cascade.unit", "MM")
-    with occt_messages_muted():
-        status = reader.ReadFile(str(path))
-    if status != IFSelect_RetDone:
+    if reader.ReadFile(str(path)) != IFSelect_RetDone:
         raise AmprepError(ErrorCode.UNREADABLE_CAD, f"the {name} file could not be parsed")
     return reader
 
@@ -221,12 +219,14 @@ def _iter_map(m: TopTools_IndexedMapOfShape):  # type: ignore[no-untyped-def]
 
 
 def read_shape(path: str | Path, fmt: str) -> tuple[TopoDS_Shape, str]:
-    """The shape OCCT's reader transfers from a STEP, IGES or BREP file (in mm), and the unit the file declared."""
+    """The shape OCCT's reader transfers from a STEP, IGES or BREP file (in mm), and the unit the file declared;
+    OCCT prints nothing meanwhile (occt_messages_muted)."""
     readers = {"step": _read_step, "iges": _read_iges, "brep": _read_brep}
     if fmt not in readers:
         raise AmprepError(ErrorCode.UNSUPPORTED_FORMAT, f"{fmt} is not a CAD format")
     try:
-        shape, units = readers[fmt](Path(path))
+        with occt_messages_muted():  # parse, transfer and any second parse alike
+            shape, units = readers[fmt](Path(path))
     except AmprepError:
         raise
     except Exception as exc:  # noqa: BLE001 - OCCT failures surface as assorted exception types

@@ -50,8 +50,8 @@ def _child(path: str, fmt: str, params: MeshParams) -> tuple[bytes, str, bool, f
 
 def read_and_mesh_ahead(path: str | Path, fmt: str, params: MeshParams) -> tuple[CadModel, float]:
     """read_and_mesh, in a forked child while this process warms the kernels (when they are not loaded yet and a
-    second core exists, at once for a large file, after WARM_AFTER for a small one; in this process otherwise). OCCT's parallel meshing runs in the child only when this
-    process never started OCCT's thread pool. A child that dies (OCCT crashing on the file) is unreadable_cad."""
+    second core exists; after warm_delay; in this process otherwise). OCCT's parallel meshing runs in the child only
+    when this process never started OCCT's thread pool. A child that dies (OCCT crashing on the file) is unreadable_cad."""
     if kernels_loaded():
         return read_and_mesh(path, fmt, params)
     child_params = replace(params, parallel=params.parallel and occt_pool_untouched())

@@ -113,7 +113,7 @@ def test_step_surface_model_with_a_shell_per_face_is_sewn_closed(tmp_path):
     import cadquery as cq
     from OCP.TopAbs import TopAbs_SHELL
 
-    from amprep.geometry.cad import free_edge_count, read_shape
+    from amprep.geometry.cad import _indexed, free_edge_count, read_shape
     from amprep.geometry.checks import check_mesh, manifold3d_accepts
     from amprep.geometry.mesher import mesh_model
     from amprep.geometry.tessellate import MeshParams
@@ -121,7 +121,7 @@ def test_step_surface_model_with_a_shell_per_face_is_sewn_closed(tmp_path):
     block = cq.Workplane("XY").box(20, 12, 6).faces(">Z").workplane().hole(5).val().wrapped
     path = _write_step(_one_shell_per_face(block), tmp_path / "shells.step")
     raw, _ = read_shape(path, "step")
-    assert _indexed_count(raw, TopAbs_SHELL) == 7 and free_edge_count(raw) > 0  # the control: all apart as stored
+    assert _indexed(raw, TopAbs_SHELL).Extent() == 7 and free_edge_count(raw) > 0  # the control: all apart as stored
     m = read_cad(path)
     assert m.sewn and m.solids == 0 and len(m.faces) == 7 and free_edge_count(m.shape) == 0
     r = mesh_model(m, MeshParams(tolerance=0.05))
@@ -149,15 +149,6 @@ def test_loose_faces_are_sewn_and_solids_beside_them_kept(tmp_path):
     assert m.sewn and m.solids == 1 and len(m.faces) == 9 and free_edge_count(m.shape) == 0
     assert sum(s == 0 for s in m.face_solid) == 6
     assert not read_cad(corpus("as1_assembly_ap214.stp")).sewn
-
-
-def _indexed_count(shape, kind):
-    from OCP.TopExp import TopExp
-    from OCP.TopTools import TopTools_IndexedMapOfShape
-
-    m = TopTools_IndexedMapOfShape()
-    TopExp.MapShapes_s(shape, kind, m)
-    return m.Extent()
 
 
 def test_only_occt_failures_become_unreadable_cad(monkeypatch):
