@@ -56,7 +56,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
     params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular,
                         min_size=args.min_size, algorithm=args.algorithm,
-                        coarsen_circles=not args.keep_occt_circles, own_large_faces=not args.occt_large_faces)
+                        occt_edges=args.occt_edges, own_large_faces=not args.occt_large_faces)
     update, close = _progress_bar(args.quiet)
     try:
         result = convert(args.input, params, update)
@@ -265,11 +265,11 @@ def build_parser() -> argparse.ArgumentParser:
     tol = c.add_mutually_exclusive_group()
     tol.add_argument("--tolerance", type=float, default=0.1, help="max chord deviation in mm (default 0.1)")
     tol.add_argument("--relative", type=float, default=None, help="tolerance as a fraction of the bounding-box diagonal")
-    c.add_argument("--angular", type=float, default=0.5, help="angular deflection in radians (default 0.5)")
+    c.add_argument("--angular", type=float, default=0.5, help="largest angle one segment of a curved edge turns through, radians (default 0.5)")
     c.add_argument("--min-size", type=float, default=0.0, help="smallest triangle edge in mm (default: tolerance/10)")
     c.add_argument("--algorithm", choices=["delabella", "watson"], default="delabella", help="OCCT mesh algorithm")
-    c.add_argument("--keep-occt-circles", action="store_true",
-                   help="keep OCCT's discretisation of circles it over-refines (more triangles)")
+    c.add_argument("--occt-edges", action="store_true",
+                   help="discretise every edge as OCCT does, at half the tolerance and angle (more triangles)")
     c.add_argument("--occt-large-faces", action="store_true",
                    help="let OCCT mesh large torus faces too (by default they are ours: faster, fewer triangles)")
     c.add_argument("--ascii", action="store_true", help="ASCII STL instead of binary")

@@ -13,7 +13,7 @@ from typing import Any
 from .geometry.errors import AmprepError, ErrorCode
 from .geometry.progress import ProgressFn
 
-MESH_KEYS = ("tolerance", "relative", "angular", "min_size", "algorithm", "coarsen_circles", "own_large_faces")
+MESH_KEYS = ("tolerance", "relative", "angular", "min_size", "algorithm", "occt_edges", "own_large_faces")
 
 
 def mesh_params(params: dict[str, Any]):  # type: ignore[no-untyped-def]

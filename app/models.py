@@ -23,12 +23,13 @@ class _MeshingParams(_Params):
     tolerance: float = Field(0.1, gt=0, le=100, description="Max chord deviation from the exact surface, mm")
     relative: float | None = Field(None, gt=0, lt=1, description="Tolerance as a fraction of the bounding-box "
                                    "diagonal (replaces tolerance)")
-    angular: float = Field(0.5, gt=0, le=3.14, description="Angular deflection, radians")
+    angular: float = Field(0.5, gt=0, le=1.57, description="Largest angle one segment of a curved edge turns "
+                           "through, radians")
     min_size: float = Field(0.0, ge=0, description="Smallest triangle edge, mm (0: tolerance/10)")
     algorithm: Literal["delabella", "watson"] = Field("delabella", description="OCCT mesh algorithm")
-    coarsen_circles: bool = Field(True, description="Re-discretise circles OCCT over-refines where only planes, "
-                                  "cylinders and cones meet them (fewer triangles, same tolerance); false keeps "
-                                  "OCCT's edge discretisation")
+    occt_edges: bool = Field(False, description="Discretise every B-rep edge as OCCT's BRepMesh does, at half the "
+                             "tolerance and half the angle (more triangles); false: at 0.95× the tolerance where only "
+                             "ruled faces meet (planes, cylinders, cones, extrusions)")
     own_large_faces: bool = Field(True, description="Mesh torus faces expected to need 20,000 triangles or more "
                                   "ourselves from curvature-sized points (faster than OCCT, fewer triangles); false "
                                   "leaves every face to OCCT's BRepMesh")

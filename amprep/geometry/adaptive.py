@@ -11,7 +11,7 @@ import numpy as np
 from .chordal import triangle_chordal_error
 from .edge_curves import EdgeCurves
 from .errors import AmprepError, ErrorCode
-from .mesh import IN_FACE, ON_BREP_EDGE, Mesh
+from .mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
 from .sma import Refinement, _nearest_copy, edge_table
 from .surfaces import Surface
 
@@ -27,11 +27,60 @@ def _errors(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarr
     return err
 
 
-def _edge_sagitta(corners: np.ndarray, uvs: np.ndarray, fids: np.ndarray, chosen: np.ndarray,
+def pole_vertices(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarray, vdim: np.ndarray,
+                  surfaces: dict[int, Surface], faces: np.ndarray) -> dict[tuple[int, int], int]:
+    """{(vertex, face): free (u,v) coordinate} of the poles among the B-rep vertices of `faces`: a vertex whose corners
+    in the face differ in one coordinate only, and whose surface point halfway between two of them is the vertex
+    itself (a cone's apex, a sphere's pole; on a seam the point halfway is elsewhere)."""
+    out: dict[tuple[int, int], int] = {}
+    r, c = np.nonzero((vdim[tris] == ON_BREP_VERTEX) & np.isin(fids, faces)[:, None])
+    if not len(r):
+        return out
+    v, f, uv = tris[r, c], fids[r], uvs[r, c]
+    key = v.astype(np.int64) * (int(fids.max()) + 1) + f
+    order = np.argsort(key, kind="stable")
+    groups = np.split(order, np.flatnonzero(np.diff(key[order])) + 1)
+    for g in groups:
+        lo, hi = uv[g].min(axis=0), uv[g].max(axis=0)
+        spread = hi - lo
+        if (spread > 1e-9).sum() != 1:
+            continue
+        free = int(np.argmax(spread))
+        half = surfaces[int(f[g[0]])].evaluate((0.5 * (lo + hi))[None])[0]
+        if np.linalg.norm(half - verts[v[g[0]]]) <= 1e-6 * (1.0 + np.abs(verts[v[g[0]]]).max()):
+            out[(int(v[g[0]]), int(f[g[0]]))] = free
+    return out
+
+
+def _centre_poles(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray,
+                  poles: dict[tuple[int, int], int]) -> np.ndarray:
+    """(m, 3, 2) the corners' (u,v) with each pole corner's free coordinate at the mean of the triangle's two other
+    corners' (where the triangle leaves the pole), so the (u,v) triangle maps onto the 3D one without a fold."""
+    out = uvs.copy()
+    for (v, f), k in poles.items():
+        r, c = np.nonzero((tris == v) & (fids == f)[:, None])
+        out[r, c, k] = 0.5 * (uvs[r, (c + 1) % 3, k] + uvs[r, (c + 2) % 3, k])
+    return out
+
+
+def _mid_uv(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int]) -> np.ndarray:
+    """(m, 3, 2) (u,v) midpoint of each edge (corner s → s+1); at a pole, its free coordinate is taken from the edge's
+    other end, so the midpoint lies on the line from that end to the pole (a cone's ruling, a sphere's meridian)
+    instead of wherever the pole's corner happens to sit."""
+    ends = uvs.copy()
+    nxt = np.roll(uvs, -1, axis=1)
+    for (v, f), k in poles.items():
+        r, c = np.nonzero((tris == v) & (fids == f)[:, None])
+        ends[r, c, k] = nxt[r, c, k]  # the pole as the first end of edge c
+        prev = (c + 2) % 3
+        nxt[r, prev, k] = uvs[r, prev, k]  # and as the second end of edge c − 1
+    return 0.5 * (ends + nxt)
+
+
+def _edge_sagitta(corners: np.ndarray, mid_uv: np.ndarray, fids: np.ndarray, chosen: np.ndarray,
                   surfaces: dict[int, Surface]) -> np.ndarray:
     """(m, 3) |S(uv midpoint) − chord midpoint| of each edge (corner s → s+1) of the chosen triangles (0 elsewhere)."""
     out = np.zeros((len(corners), 3))
-    mid_uv = 0.5 * (uvs + np.roll(uvs, -1, axis=1))
     chord = 0.5 * (corners + np.roll(corners, -1, axis=1))
     for f in np.unique(fids[chosen]):
         t = np.flatnonzero(chosen & (fids == f))
@@ -93,7 +142,9 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     chosen = np.isin(fids, faces)
     unsplittable: set[tuple[int, int]] = set()  # contour edges with no B-rep edge behind them, or whose pcurves miss it
     tol = 0.5 * target  # how far a pcurve's point may lie from the 3D edge's for the split to be taken
+    poles = pole_vertices(verts, tris, uvs, fids, vdim, surfaces, faces)
     for _ in range(max_rounds):
+        uvs = _centre_poles(uvs, tris, fids, poles)
         current = Mesh(verts, tris, fids, None, vdim, vent, vpar)
         err = _errors(verts, tris, uvs, fids, faces, surfaces, order)
         edge_id, inner = edge_table(current)
@@ -121,7 +172,8 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
             on_curve[np.fromiter(resolved, np.int64)] = True
         splittable = (inner[edge_id] | on_curve[edge_id]) & chosen[:, None]
         length = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)  # edge s: corner s → s+1
-        weight = _edge_sagitta(corners, uvs, fids, chosen, surfaces) if by_sagitta else length
+        own_mid = _mid_uv(uvs, tris, fids, poles)  # (m, 3, 2)
+        weight = _edge_sagitta(corners, own_mid, fids, chosen, surfaces) if by_sagitta else length
         score = np.where(splittable & (length > 0), weight + 1e-12 * length, -1.0)  # ties: the longer edge
         cand = score.argmax(axis=1)
         has_cand = score.max(axis=1) >= 0
@@ -150,7 +202,6 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         slot_rows, slot_cols = np.nonzero(edge_split)
         eids = edge_id[slot_rows, slot_cols]
         uniq, first = np.unique(eids, return_index=True)
-        own_mid = 0.5 * (uvs + np.roll(uvs, -1, axis=1))  # (m, 3, 2)
         canon_uv = own_mid[slot_rows[first], slot_cols[first]]
         canon_face = fids[slot_rows[first]]
         new_xyz = np.empty((len(uniq), 3))
@@ -185,6 +236,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         vdim, vent, vpar = np.concatenate([vdim, new_dim]), np.concatenate([vent, new_ent]), np.concatenate([vpar, new_par])
         tris, uvs, src = _bisect(tris, uvs, vid, mid_uv, cand, n_split)
         fids, chosen, parent = fids[src], chosen[src], parent[src]
+    uvs = _centre_poles(uvs, tris, fids, poles)
     order_ = np.argsort(parent, kind="stable")
     refined = Mesh(verts, tris[order_], fids[order_], uvs[order_], vdim if mesh.vertex_dim is not None else None,
                    vent if mesh.vertex_entity is not None else None, vpar if mesh.vertex_param is not None else None,

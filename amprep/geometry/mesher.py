@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from OCP.Bnd import Bnd_Box
 from OCP.BRep import BRep_Tool
-from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepBndLib import BRepBndLib
-from OCP.GeomAbs import GeomAbs_Circle
-from OCP.TopoDS import TopoDS
 
+from .brepmesh import run_brepmesh
 from .cad import CadModel
 from .checks import DEGENERATE_REL_AREA
 from .chordal import COMPILED_MIN_POINTS, barycentric_grid, kernels_loaded, load_kernels, triangle_chordal_error
@@ -31,7 +29,6 @@ from .tessellate import (
     Topology,
     bulk_triangulation_arrays,
     face_edges,
-    run_brepmesh,
 )
 from .weld import orient_stored_shells, weld
 
@@ -45,17 +42,6 @@ TRIGGER_MARGIN = 0.995
 #: order-6 points; its miss is ~(6/24)² × 0.5 % = 0.03 %) and kept when that stays ≤ FINE_MARGIN × tolerance
 FINE_ORDER = 24
 FINE_MARGIN = 0.999
-#: circles are re-discretised at this × tolerance (the re-meshed faces then aim at ENFORCE_MARGIN) when OCCT used
-#: more than COARSEN_EXCESS × the segments that needs (it meshes a cylinder r=10 at 0.49× the tolerance)
-COARSEN_TARGET = 0.95
-COARSEN_EXCESS = 1.1
-#: and only for a group of faces where that saves at least this fraction of their triangles (re-meshing costs time)
-COARSEN_MIN_GAIN = 0.2
-#: re-meshing a face costs ~1.5 ms whatever it saves (CTC-02 at 0.1 mm: all 161 faces 0.24 s for 8 % fewer triangles):
-#: at most this many faces are re-meshed for it, those of the groups that save the most per face first
-COARSEN_MAX_FACES = 16
-
-
 #: a face of at least LOCAL_MIN_TRIANGLES with at most LOCAL_MAX_BAD of them over the target is refined where they
 #: are (patch_refine.py); any other is meshed again whole: a fresh CDT packs the points better than OCCT's layout
 #: can be mended (a countersink cone's apex fan: 90 triangles re-meshed, 124 mended), and a small face costs little;
@@ -159,15 +145,6 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
         elif look.error is not None:
             first_error[i] = look.error
     prog("meshing", 0.5)
-    coarsened: set[int] = set()
-    occt_params: dict[int, np.ndarray] = {}
-    occt_patches = list(patches)
-    if params.coarsen_circles and not params.force_fallback:
-        occt_params = coarsen_circle_edges(model, topo, patches, surfaces, tol * COARSEN_TARGET, params.angular)
-        occt_params = _keep_coarsening_that_pays(model, topo, patches, occt_params)
-        coarsened = set().union(*(_faces_of_edge(model, topo, e) for e in occt_params))
-        for i in coarsened:
-            fallback.setdefault(i, "coarsened")
     # edges of faces that keep OCCT's mesh keep OCCT's discretisation; re-mesh the rest from it
     todo = set(fallback)
     errors: list[np.ndarray] = [np.zeros(0)] * n_faces
@@ -179,10 +156,10 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
         for i in remesh:  # every edge discretised here, before faces are meshed apart from each other
             discretize_missing_edges(model.faces[i], topo, tol * ENFORCE_MARGIN, params.angular)
 
-        def remesh_face(i: int, coarsened: set[int] = coarsened) -> FacePatch | None:
+        def remesh_face(i: int) -> FacePatch | None:
             old = patches[i]
             seeds = None
-            if old is not None and old.uv is not None and i not in coarsened:
+            if old is not None and old.uv is not None:
                 seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
             try:
                 return mesh_face(i, model.faces[i], topo, surfaces[i], tol * ENFORCE_MARGIN,  # type: ignore[arg-type]
@@ -194,15 +171,11 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
             patches[i] = patch
             if patch is None:
                 unmeshed.append(i)
-        if round_ == 0 and occt_params:
-            back = _revert_coarsening_that_grew(model, topo, patches, occt_patches, occt_params, fallback)
-            coarsened -= back
-            unmeshed = [i for i in unmeshed if i not in back]
         for i in range(n_faces):
             stage("measuring chordal error", 0.5 + 0.5 * i / n_faces)
             if patches[i] is None or not (round_ == 0 or i in todo):
                 continue
-            if round_ == 0 and i in first_error and patches[i] is occt_patches[i]:
+            if round_ == 0 and i in first_error:
                 errors[i] = first_error[i]
             else:
                 errors[i] = patch_error(patches[i], surfaces[i], params.sample_order)
@@ -283,104 +256,6 @@ def _remesh_cost(patch: FacePatch | None, error: np.ndarray, target: float) -> f
     if len(error) != len(patch.tris) or not len(error):
         return REMESH_PER_FACE + float(len(patch.tris))
     return REMESH_PER_FACE + float(np.maximum(np.nan_to_num(error / target, nan=1.0), 1.0).sum())
-
-
-def coarsen_circle_edges(model: CadModel, topo: Topology, patches: list[FacePatch | None],
-                         surfaces: list[Surface | None], target: float, angular: float) -> dict[int, np.ndarray]:
-    """Re-discretise every circular B-rep edge that OCCT split into more than COARSEN_EXCESS × the segments its
-    sagitta needs, r(1 − cos(Δ/2)) ≤ target with Δ ≤ angular, uniformly, where every face on it is a plane or a
-    cylinder meshed by OCCT (their error is the boundary circles' sagitta, so fewer segments keep the tolerance; a
-    cone's apex makes CDT fans that need more points than OCCT's rings); returns {edge: OCCT's parameters}."""
-    out: dict[int, np.ndarray] = {}
-    for ei, par in list(topo.edge_params.items()):
-        if len(par) < 4:
-            continue
-        edge = TopoDS.Edge_s(topo.edges.FindKey(ei + 1))
-        curve = BRepAdaptor_Curve(edge)
-        if curve.GetType() != GeomAbs_Circle:
-            continue
-        faces = _faces_of_edge(model, topo, ei)
-        if not faces or any(patches[f] is None or patches[f].meshed_by != "occt" or surfaces[f] is None  # type: ignore[union-attr]
-                            or surfaces[f].surface_type not in ("plane", "cylinder") for f in faces):  # type: ignore[union-attr]
-            continue
-        r = curve.Circle().Radius()
-        step = min(angular, 2 * np.arccos(1 - target / r)) if target < r else angular
-        n = max(int(np.ceil((par[-1] - par[0]) / step - 1e-9)), 2)
-        if len(par) - 1 > COARSEN_EXCESS * n:
-            out[ei] = par
-            topo.edge_params[ei] = np.linspace(par[0], par[-1], n + 1)
-    return out
-
-
-def _edge_groups(model: CadModel, topo: Topology, edges: Iterable[int]) -> list[tuple[list[int], list[int]]]:
-    """(faces, edges) of each connected group of faces joined through the given B-rep edges."""
-    edges = list(edges)
-    parent = {f: f for e in edges for f in _faces_of_edge(model, topo, e)}
-
-    def root(f: int) -> int:
-        while parent[f] != f:
-            f = parent[f]
-        return f
-
-    for e in edges:
-        faces = sorted(_faces_of_edge(model, topo, e))
-        for f in faces[1:]:
-            parent[root(f)] = root(faces[0])
-    groups: dict[int, tuple[list[int], list[int]]] = {}
-    for f in parent:
-        groups.setdefault(root(f), ([], []))[0].append(f)
-    for e in edges:
-        groups[root(min(_faces_of_edge(model, topo, e)))][1].append(e)
-    return list(groups.values())
-
-
-def _keep_coarsening_that_pays(model: CadModel, topo: Topology, patches: list[FacePatch | None],
-                               occt_params: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-    """Keep the re-discretisation of the groups of faces whose estimated saving (the segments removed, once per face
-    on each edge) is at least COARSEN_MIN_GAIN of their OCCT triangles, most saved per face first, up to
-    COARSEN_MAX_FACES faces in all; the other groups' edges get OCCT's parameters back."""
-    kept: dict[int, np.ndarray] = {}
-    paying = []
-    for faces, edges in _edge_groups(model, topo, occt_params):
-        saved = sum((len(occt_params[e]) - len(topo.edge_params[e])) * len(_faces_of_edge(model, topo, e))
-                    for e in edges)
-        if saved >= COARSEN_MIN_GAIN * sum(len(patches[f].tris) for f in faces):  # type: ignore[union-attr]
-            paying.append((-saved / len(faces), min(faces), faces, edges))
-        else:
-            for e in edges:
-                topo.edge_params[e] = occt_params[e]
-    budget = COARSEN_MAX_FACES
-    for _, _, faces, edges in sorted(paying):
-        if len(faces) <= budget:
-            budget -= len(faces)
-            kept.update((e, occt_params[e]) for e in edges)
-        else:
-            for e in edges:
-                topo.edge_params[e] = occt_params[e]
-    return kept
-
-
-def _revert_coarsening_that_grew(model: CadModel, topo: Topology, patches: list[FacePatch | None],
-                                 occt_patches: list[FacePatch | None], occt_params: dict[int, np.ndarray],
-                                 fallback: dict[int, str]) -> set[int]:
-    """Faces joined through re-discretised circles form groups; a group whose re-mesh has more triangles than
-    OCCT's (a cylinder whose (u,v) strips do not line up needs insertions) or failed gets OCCT's edges and meshes
-    back. Returns the faces reverted."""
-    reverted: set[int] = set()
-    for faces, _ in _edge_groups(model, topo, occt_params):
-        new = [patches[f] for f in faces]
-        if all(p is not None for p in new) and sum(len(p.tris) for p in new) < sum(  # type: ignore[union-attr]
-                len(occt_patches[f].tris) for f in faces):  # type: ignore[union-attr]
-            continue
-        for f in faces:
-            patches[f] = occt_patches[f]
-            if fallback.get(f) == "coarsened":
-                del fallback[f]
-        reverted |= set(faces)
-    for e, par in occt_params.items():
-        if _faces_of_edge(model, topo, e) & reverted:
-            topo.edge_params[e] = par
-    return reverted
 
 
 def _within_on_a_finer_grid(patch: FacePatch | None, surface: Surface | None, error: np.ndarray, tol: float) -> bool:

@@ -2,8 +2,8 @@
 interior with a dense grid, slowly, and more densely than the tolerance needs; Triangle from curvature-sized points
 (uv_seed.py) is faster with fewer triangles, both within tolerance: R20 r5 at 0.001 mm 1.4 s and 173k triangles
 against OCCT's 2.6 s and 222k, a trimmed torus 0.4 s and 95k against 1.8 s and 178k. Measured and left to OCCT:
-cylinders and cones (OCCT meshes them as strips, with no interior points, quickly; mesher.py coarsens the circles
-it over-refines), spheres (a band at 0.001 mm: 108k ours, 75k OCCT's mended), B-splines (a loft at 0.001 mm: 40k
+cylinders and cones (OCCT meshes them as strips, with no interior points, quickly, from edges at the tolerance:
+brepmesh.py), spheres (a band at 0.001 mm: 108k ours, 75k OCCT's mended), B-splines (a loft at 0.001 mm: 40k
 either way)."""
 
 from __future__ import annotations

@@ -12,12 +12,13 @@ from pathlib import Path
 from OCP.BinTools import BinTools, BinTools_FormatVersion
 from OCP.TopoDS import TopoDS_Shape
 
+from .brepmesh import occt_pool_untouched
 from .cad import CadModel, model_from_shape, read_cad
 from .chordal import kernels_loaded, warm_kernels
 from .errors import AmprepError, ErrorCode
 from .forked import Forked
 from .mesher import brepmesh_model
-from .tessellate import MeshParams, occt_pool_untouched
+from .tessellate import MeshParams
 
 #: a file this large takes the child over ~0.5 s to read (STEP parses at 1.5–5 MB/s here), which hides numba's
 #: import and first dispatch (~0.65 s), and its part is large: the kernels are warmed at once

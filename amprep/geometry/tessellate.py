@@ -1,4 +1,4 @@
-"""Tessellate a B-rep with OCCT's BRepMesh and weld the face meshes through the B-rep topology.
+"""Read the face meshes BRepMesh made (brepmesh.py) and tie them to the B-rep topology, to weld them through it.
 
 Each face's triangulation is read in bulk; the nodes on a B-rep edge are identified through the edge's
 polygon on that face's triangulation (edge index, edge parameter), the nodes on a B-rep vertex through the
@@ -9,21 +9,12 @@ meshed inconsistently with their edges, are meshed again from the shared edge di
 from __future__ import annotations
 
 import io
-import sys
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from OCP.BinTools import BinTools, BinTools_FormatVersion
 from OCP.BRep import BRep_Builder, BRep_Tool
-from OCP.BRepMesh import BRepMesh_IncrementalMesh
-from OCP.BRepTools import BRepTools
-from OCP.IMeshTools import (
-    IMeshTools_MeshAlgoType_Delabella,
-    IMeshTools_MeshAlgoType_Watson,
-    IMeshTools_Parameters,
-)
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
@@ -46,7 +37,7 @@ class MeshParams:
     enforce_tolerance: bool = True
     force_fallback: bool = False
     sample_order: int = 6
-    coarsen_circles: bool = True  # re-discretise circles OCCT over-refines where only planes and cylinders meet
+    occt_edges: bool = False  # every edge at half the tolerance and angle, as BRepMesh does (brepmesh.py)
     own_large_faces: bool = True  # mesh large torus faces ourselves, not with BRepMesh (own_faces.py)
     occt_surface_control: bool = False  # OCCT's own deflection check of face interiors (ours replaces it)
 
@@ -67,52 +58,6 @@ class MeshParams:
             bad = f"sample order must be 1..20, got {self.sample_order}"
         if bad:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, bad)
-
-
-_pool_started = False  # True once this process ran BRepMesh in parallel (OCCT's thread pool then has threads)
-
-
-def occt_pool_untouched() -> bool:
-    """True when this process has not run OCCT in parallel, as far as it can tell (no parallel run_brepmesh, no
-    cadquery imported): a forked child may then start OCCT's thread pool itself. After a fork the pool's threads
-    of the parent are gone but its state says they exist, and a parallel BRepMesh in the child waits for ever."""
-    return not _pool_started and "cadquery" not in sys.modules
-
-
-def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams,
-                 skip: Sequence[TopoDS_Face] = ()) -> None:
-    """Clear any earlier triangulation (a stale one is silently reused otherwise), then BRepMesh the shape, or with
-    `skip` a compound of its faces but those (edges at the tolerance; face interiors without OCCT's surface
-    deflection control unless occt_surface_control)."""
-    BRepTools.Clean_s(shape)
-    if skip:
-        left_out = TopTools_IndexedMapOfShape()
-        for f in skip:
-            left_out.Add(f)
-        builder, comp = BRep_Builder(), TopoDS_Compound()
-        builder.MakeCompound(comp)
-        kept = 0
-        for f in explore(shape, TopAbs_FACE, TopoDS.Face_s):
-            if not left_out.Contains(f):
-                builder.Add(comp, f)
-                kept += 1
-        if not kept:
-            return
-        shape = comp
-    p = IMeshTools_Parameters()
-    p.Deflection = tolerance
-    p.Angle = params.angular
-    p.Relative = False
-    p.InParallel = params.parallel
-    if params.parallel:
-        global _pool_started
-        _pool_started = True
-    p.MinSize = params.min_size if params.min_size > 0 else max(tolerance * 0.1, 1e-7)
-    p.MeshAlgo = IMeshTools_MeshAlgoType_Delabella if params.algorithm == "delabella" else IMeshTools_MeshAlgoType_Watson
-    # OCCT's interior deflection control (test points, insert, re-triangulate, repeat) is 90 % of its time on
-    # free-form parts and still leaves faces over tolerance; our per-triangle check and local insertion replace it
-    p.ControlSurfaceDeflection = params.occt_surface_control
-    BRepMesh_IncrementalMesh(shape, p)
 
 
 def trsf_matrix(loc: TopLoc_Location) -> np.ndarray | None:

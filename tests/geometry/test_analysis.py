@@ -155,8 +155,9 @@ def test_nonmanifold_vertex_and_boundary_loops():
 
 def test_bounding_box_method_against_the_approximate_one(reference_solids):
     """How the thesis's box method compares with t·|cos θ|, documented on exact parts at t = 0.2 mm:
-    on a cone (constant slope) both give the same maximum; on a vertical cylinder both give 0 (horizontal caps are
-    not counted by either); on a sphere the box mean is within 15 % of t/2."""
+    on a cone (constant slope) both give the same maximum where its radius is ≥ 10 t (nearer the apex a box also holds
+    points of the neighbouring facets, whose rays run longer: how far depends on the mesh there); on a vertical
+    cylinder both give 0 (horizontal caps are not counted by either); on a sphere the box mean is within 15 % of t/2."""
     out = {}
     for name in ("cone", "cylinder", "sphere"):
         mesh = _mesh_of(reference_solids[name], 0.01)
@@ -165,7 +166,8 @@ def test_bounding_box_method_against_the_approximate_one(reference_solids):
         out[name] = (box, approx)
         assert box["non_empty_boxes"] > 0 and box["max"] <= 0.2 * np.sqrt(2) + 1e-9
     box, approx = out["cone"]
-    assert box["max"] == pytest.approx(approx["max"], rel=0.02)  # t·sin(atan(1/2)) = 0.0894
+    wide = [s["max"] for s in box["per_slice"] if s["max"] is not None and 10 * (1 - s["z"] / 20) >= 10 * 0.2]
+    assert max(wide) == pytest.approx(approx["max"], rel=0.02)  # t·sin(atan(1/2)) = 0.0894
     box, approx = out["cylinder"]
     assert box["max"] < 1e-9 and approx["max"] < 1e-12
     box, approx = out["sphere"]

@@ -75,18 +75,18 @@ def test_bad_output_extension_and_parameter(tmp_path):
     assert r.returncode == 2 and "[invalid_parameter]" in r.stderr
 
 
-def test_keep_occt_circles_gives_occts_count_and_the_default_fewer(tmp_path):
-    """cadquery's cube + cylinder: OCCT over-refines the cylinder's circles; by default they are re-discretised
-    (fewer triangles, still closed and within tolerance), --keep-occt-circles keeps OCCT's, and the report says
-    which was used."""
+def test_occt_edges_gives_occts_count_and_the_default_fewer(tmp_path):
+    """cadquery's cube + cylinder: OCCT discretises the cylinder's circles at half the tolerance; by default they are
+    at the tolerance (fewer triangles, still closed and within tolerance), --occt-edges keeps OCCT's, and the report
+    says which was used."""
     counts = {}
-    for flag in ([], ["--keep-occt-circles"]):
+    for flag in ([], ["--occt-edges"]):
         out, report = tmp_path / f"p{len(flag)}.stl", tmp_path / f"r{len(flag)}.json"
         r = run("convert", str(corpus("cq_cube_cylinder_colors.step")), "-o", str(out), "--report", str(report), *flag)
         assert r.returncode == 0, r.stderr
         summary = json.loads(report.read_text())
         assert summary["mesh"]["watertight"] is True and summary["meshing"]["max_chordal_error"] <= 0.1
-        assert summary["provenance"]["params"]["coarsen_circles"] is (not flag)
+        assert summary["provenance"]["params"]["occt_edges"] is bool(flag)
         counts[bool(flag)] = read_stl(out).n_triangles
     assert counts[False] < 0.8 * counts[True]
 

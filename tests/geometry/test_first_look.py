@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from amprep.geometry import face_pool
+from amprep.geometry.brepmesh import run_brepmesh
 from amprep.geometry.cad import read_cad
 from amprep.geometry.chordal import load_kernels
 from amprep.geometry.first_look import _Chunk, first_look, patch_error, rejected
@@ -21,7 +22,6 @@ from amprep.geometry.tessellate import (
     bulk_triangulation_arrays,
     check_patch_boundary,
     extract_patch,
-    run_brepmesh,
 )
 from tests.conftest import corpus
 

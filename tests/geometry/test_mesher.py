@@ -165,8 +165,9 @@ def test_bulk_triangulation_read_equals_the_node_by_node_read(name, monkeypatch)
     from OCP.TopLoc import TopLoc_Location
 
     from amprep.geometry import tessellate
+    from amprep.geometry.brepmesh import run_brepmesh
     from amprep.geometry.cad import read_cad
-    from amprep.geometry.tessellate import bulk_triangulation_arrays, run_brepmesh, triangulation_arrays
+    from amprep.geometry.tessellate import bulk_triangulation_arrays, triangulation_arrays
 
     model = read_cad(corpus(name))
     run_brepmesh(model.shape, 0.05, MeshParams(tolerance=0.05))
@@ -193,7 +194,7 @@ def test_a_close_call_is_measured_again_on_a_finer_grid_instead_of_re_meshed(ref
     which keeps the doubt under FINE_MARGIN, so OCCT's mesh is kept (its triangle count, no fallback); a face whose
     finer measure leaves the doubt is re-meshed."""
     from amprep.geometry import mesher
-    from amprep.geometry.tessellate import run_brepmesh
+    from amprep.geometry.brepmesh import run_brepmesh
 
     model = model_from_shape(reference_solids["torus"])
     params = MeshParams(tolerance=0.001, own_large_faces=False)  # the torus is OCCT's to mesh here
@@ -209,87 +210,6 @@ def test_a_close_call_is_measured_again_on_a_finer_grid_instead_of_re_meshed(ref
     assert strict.fallback_faces == {0: "tolerance"} and strict.max_error <= 0.001 * mesher.FINE_MARGIN
 
 
-@pytest.mark.parametrize("tol", [0.1, 0.01, 0.001])
-def test_circles_occt_over_refines_are_re_discretised_with_fewer_triangles(reference_solids, tol):
-    """OCCT meshes a cylinder r=10 at 0.49× the tolerance (about 1.4× the segments needed); its circles are
-    re-discretised uniformly at the sagitta the tolerance allows and the three faces re-meshed: fewer triangles,
-    still closed and within the tolerance, and OCCT's mesh is what comes out with coarsen_circles off."""
-    model = model_from_shape(reference_solids["cylinder"])
-    occt = mesh_model(model, MeshParams(tolerance=tol, coarsen_circles=False))
-    res = mesh_model(model, MeshParams(tolerance=tol))
-    assert occt.fallback_faces == {} and occt.max_error < 0.6 * tol
-    assert set(res.fallback_faces.values()) == {"coarsened"}
-    assert res.mesh.n_triangles <= 0.8 * occt.mesh.n_triangles
-    c = check_mesh(res.mesh)
-    assert c.closed and c.degenerate_triangles == 0 and manifold3d_accepts(res.mesh)
-    assert 0.6 * tol < res.max_error <= tol
-    r = 10.0
-    n = int(np.ceil(2 * np.pi / min(0.5, 2 * np.arccos(1 - 0.95 * tol / r))))
-    on_circle = res.mesh.vertex_dim == 1
-    assert on_circle.sum() == 2 * (n - 1)  # two circles of n segments; their closing vertex is a B-rep vertex
-
-
-def test_circles_next_to_other_surfaces_keep_occts_discretisation(reference_solids):
-    """The filleted block's circular arcs join cylinders (fillets) to spheres (corners), whose error is not the
-    circle's sagitta: every B-rep edge keeps OCCT's discretisation and no face is re-meshed for coarsening."""
-    model = model_from_shape(reference_solids["filleted_block"])
-    res = mesh_model(model, MeshParams(tolerance=0.1))
-    occt = mesh_model(model, MeshParams(tolerance=0.1, coarsen_circles=False))
-    assert "coarsened" not in res.fallback_faces.values()
-
-    def per_edge(mesh):
-        on = mesh.vertex_dim == 1
-        return np.bincount(mesh.vertex_entity[on], minlength=200)
-
-    assert np.array_equal(per_edge(res.mesh), per_edge(occt.mesh)) and res.mesh.n_triangles == occt.mesh.n_triangles
-
-
-def test_coarsened_circles_cost_no_triangles_and_a_coarsening_that_would_add_some_is_reverted(monkeypatch):
-    """On NIST CTC-02 at 0.01 mm the cylinders re-meshed from coarsened circles (curvature-sized points, in their
-    stretched (u,v)) have fewer triangles than OCCT's: face 44 412 against 478; face 48 is not coarsened at all (its
-    saving is under COARSEN_MIN_GAIN). Forced: re-meshed from OCCT's interior nodes instead (their (u,v) strips do
-    not line up: ~7,100 triangles each, as before the curvature sizing), face 44's group gets OCCT's edges and
-    meshes back, so the part never has more triangles than with OCCT's circles."""
-    from amprep.geometry import mesher
-
-    model = read_cad(corpus("nist_ctc02_ap242.stp"))
-    occt = mesh_model(model, MeshParams(tolerance=0.01, coarsen_circles=False))
-    n_occt = np.bincount(occt.mesh.face_ids, minlength=len(model.faces))
-
-    def check(res):
-        c = check_mesh(res.mesh)
-        assert c.closed and c.degenerate_triangles == 0 and res.max_error <= 0.01
-        assert "coarsened" in res.fallback_faces.values()
-        return np.bincount(res.mesh.face_ids, minlength=len(model.faces))
-
-    res = mesh_model(model, MeshParams(tolerance=0.01))
-    n_res = check(res)
-    assert res.fallback_faces.get(44) == "coarsened" and n_res[44] <= n_occt[44]
-    assert 48 not in res.fallback_faces and n_res[48] == n_occt[48] and res.mesh.n_triangles < occt.mesh.n_triangles
-    real = mesher.mesh_face
-    monkeypatch.setattr(mesher, "mesh_face", lambda *a, **k: real(*a, **k, curvature_sized=False))
-    forced = mesh_model(model, MeshParams(tolerance=0.01))
-    n_forced = check(forced)
-    assert n_forced[44] == n_occt[44] and 44 not in forced.fallback_faces
-
-
-def test_coarsening_re_meshes_at_most_its_budget_of_faces(monkeypatch):
-    """CTC-02 at 0.1 mm has 161 faces on circles worth coarsening: COARSEN_MAX_FACES of them are re-meshed (re-meshing
-    costs ~1.5 ms a face, whatever it saves); with no budget all are, for fewer triangles still."""
-    from amprep.geometry import mesher
-
-    model = read_cad(corpus("nist_ctc02_ap242.stp"))
-    budget = mesh_model(model, MeshParams(tolerance=0.1))
-    some = [i for i, why in budget.fallback_faces.items() if why == "coarsened"]
-    assert 0 < len(some) <= mesher.COARSEN_MAX_FACES
-    monkeypatch.setattr(mesher, "COARSEN_MAX_FACES", 10**6)
-    unlimited = mesh_model(model, MeshParams(tolerance=0.1))
-    every = [i for i, why in unlimited.fallback_faces.items() if why == "coarsened"]
-    assert len(every) > 4 * len(some) and unlimited.mesh.n_triangles < budget.mesh.n_triangles
-    for r in (budget, unlimited):
-        assert check_mesh(r.mesh).closed and r.max_error <= 0.1
-
-
 def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     """CTC-02's face 174 at 0.001 mm, re-meshed from OCCT's interior nodes (not the curvature-sized points, which
     this face, curved one way, does without): insertion once put two nodes 3.2e-6 mm apart (one vertex after
@@ -298,8 +218,9 @@ def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     from scipy.spatial import cKDTree
 
     from amprep.geometry import fallback, uv_cdt
+    from amprep.geometry.brepmesh import run_brepmesh
     from amprep.geometry.surfaces import surface_of
-    from amprep.geometry.tessellate import Topology, extract_patch, run_brepmesh
+    from amprep.geometry.tessellate import Topology, extract_patch
 
     pts = np.array([[0.0, 0.0], [1.0, 0.0]])
     new = np.array([[0.0, 5e-6], [0.5, 0.5], [0.5, 0.5 + 5e-6], [2.0, 2.0]])

@@ -4,13 +4,14 @@ import numpy as np
 import pytest
 
 from amprep.geometry import mesher
+from amprep.geometry.brepmesh import run_brepmesh
 from amprep.geometry.cad import model_from_shape, read_cad
 from amprep.geometry.checks import check_mesh, manifold3d_accepts
 from amprep.geometry.chordal import triangle_chordal_error
 from amprep.geometry.mesher import mesh_model, patch_error
 from amprep.geometry.patch_refine import refine_patch
 from amprep.geometry.surfaces import surface_of
-from amprep.geometry.tessellate import MeshParams, Topology, extract_patch, run_brepmesh
+from amprep.geometry.tessellate import MeshParams, Topology, extract_patch
 from tests.conftest import corpus
 
 
@@ -87,7 +88,7 @@ def test_forced_local_refinement_gives_closed_solids_within_tolerance(reference_
     monkeypatch.setattr(mesher, "LOCAL_MAX_BAD", 1.0)
     monkeypatch.setattr(mesher, "run_brepmesh", _coarse_interior_brepmesh)
     model = read_cad(corpus(name)) if "." in name else model_from_shape(reference_solids[name])
-    r = mesh_model(model, MeshParams(tolerance=0.02, coarsen_circles=False))
+    r = mesh_model(model, MeshParams(tolerance=0.02))
     assert "refined" in {f.meshed_by for f in r.mesh.faces}
     c = check_mesh(r.mesh)
     assert c.closed and c.degenerate_triangles == 0 and c.volume > 0 and manifold3d_accepts(r.mesh)
@@ -95,11 +96,11 @@ def test_forced_local_refinement_gives_closed_solids_within_tolerance(reference_
 
 
 def test_large_faces_occt_leaves_over_tolerance_are_mended_not_re_meshed():
-    """CTC-02's B-spline face 55 at 0.01 mm with OCCT's own surface deflection control: 87k triangles with 176 over
+    """CTC-02's B-spline face 55 at 0.01 mm with OCCT's own surface deflection control and edges: 87k triangles with 176 over
     the target. It is mended in place (its other triangles kept), so it ends within 1 % of OCCT's count; the part is
     closed and within tolerance."""
     model = read_cad(corpus("nist_ctc02_ap242.stp"))
-    params = MeshParams(tolerance=0.01, occt_surface_control=True)
+    params = MeshParams(tolerance=0.01, occt_surface_control=True, occt_edges=True)
     run_brepmesh(model.shape, 0.01, params)
     occt = extract_patch(55, model.faces[55], Topology.of(model.shape))
     r = mesh_model(model, params)

@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from amprep.geometry import read_ahead
+from amprep.geometry.brepmesh import occt_pool_untouched, run_brepmesh
 from amprep.geometry.convert import FORK_CHECKS_MIN, convert, output_checks
 from amprep.geometry.errors import AmprepError, ErrorCode
 from amprep.geometry.forked import Forked, fork_available
 from amprep.geometry.mesher import mesh_model
-from amprep.geometry.tessellate import MeshParams, occt_pool_untouched, run_brepmesh
+from amprep.geometry.tessellate import MeshParams
 from tests.conftest import corpus
 
 needs_fork = pytest.mark.skipif(not fork_available(), reason="no fork or a single core here")

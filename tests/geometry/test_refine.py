@@ -139,7 +139,8 @@ def test_refine_report_selects_by_threshold_and_brackets_the_file_size(tmp_path,
     shape = reference_solids["filleted_block"]
     path = tmp_path / "block.brep"
     BRepTools.Write_s(shape, str(path))
-    r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(max_chordal=0.03))
+    params = MeshParams(tolerance=0.2, occt_edges=True)  # OCCT's edges: only the sphere corners' mean is over 0.03
+    r = refine_file(path, None, params, RefineParams(max_chordal=0.03))
     rep = r.report
     jsonschema.validate(rep, json.loads((Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json").read_text(encoding="utf-8")))
     chosen = {f["id"] for f in rep["refined_faces"]}
@@ -157,13 +158,13 @@ def test_refine_report_selects_by_threshold_and_brackets_the_file_size(tmp_path,
     assert cmp_["refined"]["file_size"] == 84 + 50 * rep["mesh"]["triangles"]
     assert cmp_["refined"]["chordal_error"]["mean"] < cmp_["before"]["chordal_error"]["mean"]
     assert cmp_["other_method"]["label"].startswith("VTA")
-    none = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(max_chordal=10.0, compare=False))
+    none = refine_file(path, None, params, RefineParams(max_chordal=10.0, compare=False))
     assert none.report["refined_faces"] == [] and none.mesh.n_triangles == r.before.n_triangles
     assert none.report["issues"][0]["code"] == "nothing_to_refine"
-    named = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(method="vta", faces=(1,), compare=False))
+    named = refine_file(path, None, params, RefineParams(method="vta", faces=(1,), compare=False))
     assert [f["id"] for f in named.report["refined_faces"]] == [1] and named.report["refined_faces"][0]["reason"] == "named"
     with pytest.raises(AmprepError) as e:
-        refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(faces=(999,)))
+        refine_file(path, None, params, RefineParams(faces=(999,)))
     assert e.value.code.value == "invalid_parameter"
 
 
@@ -215,6 +216,32 @@ def test_a_refinement_over_the_triangle_limit_is_refused_before_it_runs(tmp_path
     limit = 3 * mesh.n_triangles  # VTA × 1 fits exactly, the SMA comparison (27×) does not: it is left out
     r = refine_file(path, None, MeshParams(tolerance=0.2), RefineParams(method="vta", max_triangles=limit))
     assert r.report["comparison"]["other_method"] is None and r.mesh.n_triangles == limit
+
+
+@pytest.mark.parametrize("name, occt_edges", [("cone", False), ("cone", True), ("sphere", False)])
+@pytest.mark.parametrize("by_sagitta", [True, False])
+def test_adaptive_splits_edges_to_a_pole_along_them(reference_solids, name, occt_edges, by_sagitta):
+    """A cone's apex and a sphere's poles are one vertex with a different (u,v) corner in each triangle. An edge to
+    the pole is split at its other end's free coordinate (on the ruling or meridian the edge follows, not at the
+    pole corner's arbitrary u), and each pole corner sits between its triangle's two others: no triangle joins the
+    pole to two points of one ruling (a flat triangle once made on the cone), and no round folds the (u,v) near it.
+    Longest-edge splitting (by_sagitta off) splits edges to the pole all the time."""
+    from amprep.geometry.adaptive import adaptive_refine, pole_vertices
+    from amprep.geometry.edge_curves import EdgeCurves
+
+    model = model_from_shape(reference_solids[name])
+    mesh = mesh_model(model, MeshParams(tolerance=0.2, occt_edges=occt_edges)).mesh
+    surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
+    faces = np.array(_curved(surfaces))
+    poles = pole_vertices(mesh.vertices, mesh.triangles, mesh.uv, mesh.face_ids, mesh.vertex_dim, surfaces, faces)
+    assert len(poles) == (1 if name == "cone" else 2)
+    r = adaptive_refine(mesh, faces, surfaces, 0.005, curves=EdgeCurves(model), by_sagitta=by_sagitta)
+    c = check_mesh(r.mesh)
+    assert c.closed and c.degenerate_triangles == 0 and manifold3d_accepts(r.mesh)
+    # error ∝ h², so 40× less error needs ~40× the triangles; a fold at the pole ran away to 60,000×
+    assert r.mesh.n_triangles < 3 * (0.2 / 0.005) * mesh.n_triangles
+    err = face_chordal_errors(r.mesh, surfaces, 6)
+    assert err[np.isin(r.mesh.face_ids, faces)].max() <= 0.005
 
 
 @pytest.mark.parametrize("name", ["cylinder", "sphere", "torus", "cone", "bspline_loft", "plate_with_holes"])

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from amprep.geometry import fallback, uv_seed
+from amprep.geometry.brepmesh import run_brepmesh
 from amprep.geometry.cad import read_cad
 from amprep.geometry.surfaces import Surface, cylinder, surface_of, torus
-from amprep.geometry.tessellate import MeshParams, Topology, extract_patch, run_brepmesh
+from amprep.geometry.tessellate import MeshParams, Topology, extract_patch
 from amprep.geometry.uv_cdt import metric_scale
 from tests.conftest import corpus
 
