@@ -176,8 +176,12 @@ def _peak_rss_mb() -> float:
 # ----------------------------------------------------------------------------------------- parent side
 def test_parts(folder: Path, only: str = "") -> list[Path]:
     """The reference solids of the tests, written as STEP so that every tool reads the same file (`only`:
-    comma-separated substrings of the names to build, all when empty)."""
+    comma-separated substrings of the names to build, all when empty), in `folder`: a part already there, written by
+    this cadquery version, is reused (the perforated plate takes cadquery ~15 min to build)."""
     import cadquery as cq
+
+    folder = folder / f"cadquery-{cq.__version__}"
+    folder.mkdir(parents=True, exist_ok=True)
 
     parts = {
         "sphere_r12": lambda: cq.Solid.makeSphere(12, angleDegrees1=-90, angleDegrees2=90),
@@ -193,9 +197,11 @@ def test_parts(folder: Path, only: str = "") -> list[Path]:
     for name, make in parts.items():
         if not _wanted(name, only):
             continue
-        shape = make()
         p = folder / f"{name}.step"
-        cq.exporters.export(cq.Workplane().add(shape), str(p))
+        if not p.exists():
+            part = folder / f"{name}.part.step"
+            cq.exporters.export(cq.Workplane().add(make()), str(part))
+            part.replace(p)  # whole or not at all, for the next run
         out.append(p)
     return out
 
@@ -247,6 +253,8 @@ def main() -> None:
     ap.add_argument("--tools", default=",".join(TOOLS))
     ap.add_argument("--only", default="", help="comma-separated substrings of part names")
     ap.add_argument("--name", default="bench_convert", help="docs/NAME.md and docs/NAME.csv")
+    ap.add_argument("--parts", default=str(Path.home() / ".cache" / "amprep-bench"),
+                    help="folder of the built test parts, reused between runs")
     ap.add_argument("--tolerances", default="", help="comma-separated mm, instead of 0.1, 0.01 (and 0.001 on small parts)")
     args = ap.parse_args()
     if args.child:
@@ -259,8 +267,7 @@ def main() -> None:
             print(json.dumps({"error": exc.code.value}))
         return
     tools = args.tools.split(",")
-    tmp = Path(tempfile.mkdtemp(prefix="amprep-bench-"))
-    parts = test_parts(tmp, args.only) + sorted(p for p in CORPUS.glob("*") if p.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep"))
+    parts = test_parts(Path(args.parts), args.only) + sorted(p for p in CORPUS.glob("*") if p.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep"))
     parts = [p for p in parts if _wanted(p.name, args.only)]
     rows = []
     for part in parts:
