@@ -32,48 +32,62 @@ def pole_vertices(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np
     """{(vertex, face): free (u,v) coordinate} of the poles among the B-rep vertices of `faces`: a vertex whose corners
     in the face differ in one coordinate only, and whose surface point halfway between two of them is the vertex
     itself (a cone's apex, a sphere's pole; on a seam the point halfway is elsewhere)."""
-    out: dict[tuple[int, int], int] = {}
     r, c = np.nonzero((vdim[tris] == ON_BREP_VERTEX) & np.isin(fids, faces)[:, None])
     if not len(r):
-        return out
-    v, f, uv = tris[r, c], fids[r], uvs[r, c]
-    key = v.astype(np.int64) * (int(fids.max()) + 1) + f
+        return {}
+    key = tris[r, c].astype(np.int64) * (int(fids.max()) + 1) + fids[r]  # one group per (vertex, face)
     order = np.argsort(key, kind="stable")
-    groups = np.split(order, np.flatnonzero(np.diff(key[order])) + 1)
-    for g in groups:
-        lo, hi = uv[g].min(axis=0), uv[g].max(axis=0)
-        spread = hi - lo
-        if (spread > 1e-9).sum() != 1:
-            continue
-        free = int(np.argmax(spread))
-        half = surfaces[int(f[g[0]])].evaluate((0.5 * (lo + hi))[None])[0]
-        if np.linalg.norm(half - verts[v[g[0]]]) <= 1e-6 * (1.0 + np.abs(verts[v[g[0]]]).max()):
-            out[(int(v[g[0]]), int(f[g[0]]))] = free
-    return out
+    start = np.flatnonzero(np.r_[True, np.diff(key[order]) != 0])
+    uv = uvs[r, c][order]
+    lo, hi = np.minimum.reduceat(uv, start, axis=0), np.maximum.reduceat(uv, start, axis=0)
+    one_way = ((hi - lo) > 1e-9).sum(axis=1) == 1
+    v, f = tris[r, c][order][start][one_way], fids[r][order][start][one_way]
+    half = np.empty((len(v), 3))
+    for face in np.unique(f):
+        sel = f == face
+        half[sel] = surfaces[int(face)].evaluate(0.5 * (lo + hi)[one_way][sel])
+    at_vertex = np.linalg.norm(half - verts[v], axis=1) <= 1e-6 * (1.0 + np.abs(verts[v]).max(axis=1))
+    free = np.argmax((hi - lo)[one_way], axis=1)
+    return {(int(a), int(b)): int(k) for a, b, k in zip(v[at_vertex], f[at_vertex], free[at_vertex], strict=True)}
 
 
-def _centre_poles(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray,
-                  poles: dict[tuple[int, int], int]) -> np.ndarray:
+def _pole_corners(tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
+                  n_faces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, cols, free coordinate) of the triangle corners that are poles of their triangle's face."""
+    if not poles:
+        empty = np.zeros(0, np.int64)
+        return empty, empty, empty
+    keys = np.array([v * n_faces + f for v, f in poles], np.int64)
+    free = np.array(list(poles.values()), np.int64)
+    order = np.argsort(keys)
+    keys, free = keys[order], free[order]
+    corner = tris.astype(np.int64) * n_faces + fids[:, None]
+    at = np.minimum(np.searchsorted(keys, corner), len(keys) - 1)
+    r, c = np.nonzero(keys[at] == corner)
+    return r, c, free[at[r, c]]
+
+
+def _centre_poles(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
+                  n_faces: int) -> np.ndarray:
     """(m, 3, 2) the corners' (u,v) with each pole corner's free coordinate at the mean of the triangle's two other
     corners' (where the triangle leaves the pole), so the (u,v) triangle maps onto the 3D one without a fold."""
     out = uvs.copy()
-    for (v, f), k in poles.items():
-        r, c = np.nonzero((tris == v) & (fids == f)[:, None])
-        out[r, c, k] = 0.5 * (uvs[r, (c + 1) % 3, k] + uvs[r, (c + 2) % 3, k])
+    r, c, k = _pole_corners(tris, fids, poles, n_faces)
+    out[r, c, k] = 0.5 * (uvs[r, (c + 1) % 3, k] + uvs[r, (c + 2) % 3, k])
     return out
 
 
-def _mid_uv(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int]) -> np.ndarray:
+def _mid_uv(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
+            n_faces: int) -> np.ndarray:
     """(m, 3, 2) (u,v) midpoint of each edge (corner s → s+1); at a pole, its free coordinate is taken from the edge's
     other end, so the midpoint lies on the line from that end to the pole (a cone's ruling, a sphere's meridian)
     instead of wherever the pole's corner happens to sit."""
     ends = uvs.copy()
     nxt = np.roll(uvs, -1, axis=1)
-    for (v, f), k in poles.items():
-        r, c = np.nonzero((tris == v) & (fids == f)[:, None])
-        ends[r, c, k] = nxt[r, c, k]  # the pole as the first end of edge c
-        prev = (c + 2) % 3
-        nxt[r, prev, k] = uvs[r, prev, k]  # and as the second end of edge c − 1
+    r, c, k = _pole_corners(tris, fids, poles, n_faces)
+    ends[r, c, k] = nxt[r, c, k]  # the pole as the first end of edge c
+    prev = (c + 2) % 3
+    nxt[r, prev, k] = uvs[r, prev, k]  # and as the second end of edge c − 1
     return 0.5 * (ends + nxt)
 
 
@@ -143,8 +157,9 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     unsplittable: set[tuple[int, int]] = set()  # contour edges with no B-rep edge behind them, or whose pcurves miss it
     tol = 0.5 * target  # how far a pcurve's point may lie from the 3D edge's for the split to be taken
     poles = pole_vertices(verts, tris, uvs, fids, vdim, surfaces, faces)
+    n_faces = int(fids.max()) + 1 if len(fids) else 1
     for _ in range(max_rounds):
-        uvs = _centre_poles(uvs, tris, fids, poles)
+        uvs = _centre_poles(uvs, tris, fids, poles, n_faces)
         current = Mesh(verts, tris, fids, None, vdim, vent, vpar)
         err = _errors(verts, tris, uvs, fids, faces, surfaces, order)
         edge_id, inner = edge_table(current)
@@ -172,7 +187,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
             on_curve[np.fromiter(resolved, np.int64)] = True
         splittable = (inner[edge_id] | on_curve[edge_id]) & chosen[:, None]
         length = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)  # edge s: corner s → s+1
-        own_mid = _mid_uv(uvs, tris, fids, poles)  # (m, 3, 2)
+        own_mid = _mid_uv(uvs, tris, fids, poles, n_faces)  # (m, 3, 2)
         weight = _edge_sagitta(corners, own_mid, fids, chosen, surfaces) if by_sagitta else length
         score = np.where(splittable & (length > 0), weight + 1e-12 * length, -1.0)  # ties: the longer edge
         cand = score.argmax(axis=1)
@@ -236,7 +251,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         vdim, vent, vpar = np.concatenate([vdim, new_dim]), np.concatenate([vent, new_ent]), np.concatenate([vpar, new_par])
         tris, uvs, src = _bisect(tris, uvs, vid, mid_uv, cand, n_split)
         fids, chosen, parent = fids[src], chosen[src], parent[src]
-    uvs = _centre_poles(uvs, tris, fids, poles)
+    uvs = _centre_poles(uvs, tris, fids, poles, n_faces)
     order_ = np.argsort(parent, kind="stable")
     refined = Mesh(verts, tris[order_], fids[order_], uvs[order_], vdim if mesh.vertex_dim is not None else None,
                    vent if mesh.vertex_entity is not None else None, vpar if mesh.vertex_param is not None else None,
