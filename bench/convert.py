@@ -255,6 +255,9 @@ def main() -> None:
     ap.add_argument("--name", default="bench_convert", help="docs/NAME.md and docs/NAME.csv")
     ap.add_argument("--parts", default=str(Path.home() / ".cache" / "amprep-bench"),
                     help="folder of the built test parts, reused between runs")
+    ap.add_argument("--from-log", help="comma-separated files of the JSON lines runs printed: write the tables from them "
+                    "(a cell in a later file replaces the same part, tolerance and tool of an earlier one)")
+    ap.add_argument("--made-by", default="", help="with --from-log: the commands that made the logs, for the docs")
     ap.add_argument("--tolerances", default="", help="comma-separated mm, instead of 0.1, 0.01 (and 0.001 on small parts)")
     args = ap.parse_args()
     if args.child:
@@ -265,6 +268,15 @@ def main() -> None:
             print(json.dumps(child(tool, path, float(tol), out)))
         except AmprepError as exc:  # refused by amprep code (amprep, or the checks every output goes through)
             print(json.dumps({"error": exc.code.value}))
+        return
+    if args.from_log:
+        cells: dict[tuple, dict] = {}
+        for log in args.from_log.split(","):
+            for line in Path(log).read_text().splitlines():
+                if line.startswith("{"):
+                    row = json.loads(line)
+                    cells[(row["part"], row["tolerance"], row["tool"])] = row
+        write_tables(list(cells.values()), args.name, args.made_by or f"... (written from {args.from_log})")
         return
     tools = args.tools.split(",")
     parts = test_parts(Path(args.parts), args.only) + sorted(p for p in CORPUS.glob("*") if p.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep"))
