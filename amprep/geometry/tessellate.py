@@ -26,7 +26,8 @@ from .errors import AmprepError, ErrorCode
 @dataclass(frozen=True)
 class MeshParams:
     """Meshing parameters: `tolerance` mm (absolute chord deviation) or `relative` (fraction of the bounding-box
-    diagonal, overrides tolerance), `angular` rad, `min_size` mm, `algorithm` delabella | watson."""
+    diagonal, overrides tolerance), `angular` rad (the largest turn of one edge segment), `min_size` mm, `algorithm`
+    delabella | watson."""
 
     tolerance: float = 0.1
     relative: float | None = None
