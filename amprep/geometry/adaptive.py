@@ -51,8 +51,11 @@ def pole_vertices(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np
     return {(int(a), int(b)): int(k) for a, b, k in zip(v[at_vertex], f[at_vertex], free[at_vertex], strict=True)}
 
 
+PoleCorners = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
 def _pole_corners(tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
-                  n_faces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  n_faces: int) -> PoleCorners:
     """(rows, cols, free coordinate) of the triangle corners that are poles of their triangle's face."""
     if not poles:
         empty = np.zeros(0, np.int64)
@@ -67,24 +70,23 @@ def _pole_corners(tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int
     return r, c, free[at[r, c]]
 
 
-def _centre_poles(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
-                  n_faces: int) -> np.ndarray:
-    """(m, 3, 2) the corners' (u,v) with each pole corner's free coordinate at the mean of the triangle's two other
-    corners' (where the triangle leaves the pole), so the (u,v) triangle maps onto the 3D one without a fold."""
+def _centre_poles(uvs: np.ndarray, pole: PoleCorners) -> np.ndarray:
+    """(m, 3, 2) the corners' (u,v) with each pole corner (`pole`: _pole_corners) given, in its free coordinate, the
+    mean of the triangle's two other corners' (where the triangle leaves the pole), so the (u,v) triangle maps onto
+    the 3D one without a fold."""
     out = uvs.copy()
-    r, c, k = _pole_corners(tris, fids, poles, n_faces)
+    r, c, k = pole
     out[r, c, k] = 0.5 * (uvs[r, (c + 1) % 3, k] + uvs[r, (c + 2) % 3, k])
     return out
 
 
-def _mid_uv(uvs: np.ndarray, tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
-            n_faces: int) -> np.ndarray:
-    """(m, 3, 2) (u,v) midpoint of each edge (corner s → s+1); at a pole, its free coordinate is taken from the edge's
-    other end, so the midpoint lies on the line from that end to the pole (a cone's ruling, a sphere's meridian)
-    instead of wherever the pole's corner happens to sit."""
+def _mid_uv(uvs: np.ndarray, pole: PoleCorners) -> np.ndarray:
+    """(m, 3, 2) (u,v) midpoint of each edge (corner s → s+1); at a pole corner (`pole`: _pole_corners), its free
+    coordinate is taken from the edge's other end, so the midpoint lies on the line from that end to the pole (a
+    cone's ruling, a sphere's meridian) instead of wherever the pole's corner happens to sit."""
     ends = uvs.copy()
     nxt = np.roll(uvs, -1, axis=1)
-    r, c, k = _pole_corners(tris, fids, poles, n_faces)
+    r, c, k = pole
     ends[r, c, k] = nxt[r, c, k]  # the pole as the first end of edge c
     prev = (c + 2) % 3
     nxt[r, prev, k] = uvs[r, prev, k]  # and as the second end of edge c − 1
@@ -159,7 +161,8 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     poles = pole_vertices(verts, tris, uvs, fids, vdim, surfaces, faces)
     n_faces = int(fids.max()) + 1 if len(fids) else 1
     for _ in range(max_rounds):
-        uvs = _centre_poles(uvs, tris, fids, poles, n_faces)
+        pole = _pole_corners(tris, fids, poles, n_faces)  # the same triangles until this round's bisection
+        uvs = _centre_poles(uvs, pole)
         current = Mesh(verts, tris, fids, None, vdim, vent, vpar)
         err = _errors(verts, tris, uvs, fids, faces, surfaces, order)
         edge_id, inner = edge_table(current)
@@ -187,7 +190,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
             on_curve[np.fromiter(resolved, np.int64)] = True
         splittable = (inner[edge_id] | on_curve[edge_id]) & chosen[:, None]
         length = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)  # edge s: corner s → s+1
-        own_mid = _mid_uv(uvs, tris, fids, poles, n_faces)  # (m, 3, 2)
+        own_mid = _mid_uv(uvs, pole)  # (m, 3, 2)
         weight = _edge_sagitta(corners, own_mid, fids, chosen, surfaces) if by_sagitta else length
         score = np.where(splittable & (length > 0), weight + 1e-12 * length, -1.0)  # ties: the longer edge
         cand = score.argmax(axis=1)
@@ -251,7 +254,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         vdim, vent, vpar = np.concatenate([vdim, new_dim]), np.concatenate([vent, new_ent]), np.concatenate([vpar, new_par])
         tris, uvs, src = _bisect(tris, uvs, vid, mid_uv, cand, n_split)
         fids, chosen, parent = fids[src], chosen[src], parent[src]
-    uvs = _centre_poles(uvs, tris, fids, poles, n_faces)
+    uvs = _centre_poles(uvs, _pole_corners(tris, fids, poles, n_faces))
     order_ = np.argsort(parent, kind="stable")
     refined = Mesh(verts, tris[order_], fids[order_], uvs[order_], vdim if mesh.vertex_dim is not None else None,
                    vent if mesh.vertex_entity is not None else None, vpar if mesh.vertex_param is not None else None,

@@ -19,7 +19,6 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from OCP.BRep import BRep_Builder
 from OCP.BRepAdaptor import BRepAdaptor_Surface
 from OCP.BRepMesh import BRepMesh_IncrementalMesh
 from OCP.BRepTools import BRepTools
@@ -37,10 +36,10 @@ from OCP.IMeshTools import (
     IMeshTools_Parameters,
 )
 from OCP.TopAbs import TopAbs_FACE
-from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Face, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
-from .tessellate import MeshParams, explore
+from .tessellate import MeshParams, compound, explore
 
 #: edges where only ruled faces meet are discretised at this × the tolerance (their faces' error is about the
 #: edges' sagitta; a little under 1 so that OCCT's face interiors, meshed at the tolerance, rarely exceed it)
@@ -87,22 +86,14 @@ def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams,
     if not faces:
         return
     if params.occt_edges:
-        _brepmesh(_compound(faces), tolerance, params, tolerance, params.angular)
+        _brepmesh(compound(faces), tolerance, params, tolerance, params.angular)
         return
     edge_angle = params.angular / OCCT_EDGE_FACTOR
     curved = [f for f in faces if not is_ruled(f)]
     if curved:
-        _brepmesh(_compound(curved), tolerance, params, tolerance, edge_angle)
+        _brepmesh(compound(curved), tolerance, params, tolerance, edge_angle)
     if len(curved) < len(faces):
-        _brepmesh(_compound(faces), tolerance, params, EDGE_TARGET * tolerance / OCCT_EDGE_FACTOR, edge_angle)
-
-
-def _compound(faces: list[TopoDS_Face]) -> TopoDS_Compound:
-    builder, comp = BRep_Builder(), TopoDS_Compound()
-    builder.MakeCompound(comp)
-    for f in faces:
-        builder.Add(comp, f)
-    return comp
+        _brepmesh(compound(faces), tolerance, params, EDGE_TARGET * tolerance / OCCT_EDGE_FACTOR, edge_angle)
 
 
 def _brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams, deflection: float, angle: float) -> None:

@@ -21,13 +21,13 @@ from OCP.TCollection import TCollection_AsciiString
 from OCP.TColStd import TColStd_SequenceOfAsciiString
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SHELL, TopAbs_SOLID
 from OCP.TopExp import TopExp
-from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Face, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 from OCP.XSControl import XSControl_Reader
 
 from .errors import AmprepError, ErrorCode, is_occt_failure
 from .formats import sniff_path
-from .tessellate import explore
+from .tessellate import compound, explore
 from .wire_crossings import crossing_faces
 
 
@@ -177,23 +177,13 @@ def sew_loose_faces(shape: TopoDS_Shape, tolerance: float = SEW_TOLERANCE) -> tu
     edges free; solids are kept as they are. Unchanged, False, when there is nothing to sew."""
     loose = explore(shape, TopAbs_SHELL, TopoDS.Shell_s, avoid=TopAbs_SOLID)
     loose += explore(shape, TopAbs_FACE, TopoDS.Face_s, avoid=TopAbs_SHELL)
-    builder = BRep_Builder()
-    part = TopoDS_Compound()
-    builder.MakeCompound(part)
-    for s in loose:
-        builder.Add(part, s)
+    part = compound(loose)
     faces = explore(part, TopAbs_FACE, TopoDS.Face_s)
     if len(faces) < 2 or any(BRep_Tool.Surface_s(f) is None for f in faces) or free_edge_count(part) == 0:
         return shape, False
     solids = explore(shape, TopAbs_SOLID, TopoDS.Solid_s)
-    if not solids:
-        return _sew(part, tolerance), True
-    out = TopoDS_Compound()
-    builder.MakeCompound(out)
-    for s in solids:
-        builder.Add(out, s)
-    builder.Add(out, _sew(part, tolerance))
-    return out, True
+    sewn = _sew(part, tolerance)
+    return (compound([*solids, sewn]) if solids else sewn), True
 
 
 def model_from_shape(shape: TopoDS_Shape, fmt: str = "brep", units: str = "none", sewn: bool = False) -> CadModel:

@@ -216,6 +216,15 @@ def explore(shape: TopoDS_Shape, kind, cast, avoid=None) -> list:  # type: ignor
     return out
 
 
+def compound(shapes: list) -> TopoDS_Compound:  # type: ignore[type-arg]
+    """A compound holding the given shapes (sharing their sub-shapes, not copies)."""
+    builder, comp = BRep_Builder(), TopoDS_Compound()
+    builder.MakeCompound(comp)
+    for s in shapes:
+        builder.Add(comp, s)
+    return comp
+
+
 def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
     """The oriented edges of a face (a seam edge comes twice, once per orientation)."""
     return explore(face, TopAbs_EDGE, TopoDS.Edge_s)
