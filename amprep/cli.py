@@ -8,8 +8,11 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
 
-from .geometry.errors import AmprepError, ErrorCode
+from amprep.errors import AmprepError, ErrorCode
+from amprep.jobs.params import KINDS, build, check, parse_cli_value
 
 EXIT_ERROR = 2
 
@@ -50,24 +53,42 @@ def _quiet_occt() -> None:
         messenger.RemovePrinter(printer)
 
 
-def cmd_convert(args: argparse.Namespace) -> int:
-    from .geometry.convert import convert, write_result
-    from .geometry.tessellate import MeshParams
+def _job_values(kind: str, args: argparse.Namespace) -> dict[str, Any]:
+    """The kind's parameters from the CLI's options (those given; defaults and bounds from jobs.params.check); the
+    output format from -o's extension when --format is not given."""
+    spec = KINDS[kind]
+    raw = {p.name: parse_cli_value(p, v) if isinstance(v, str) else v
+           for p in spec.params if not p.service_only and (v := getattr(args, p.name)) is not None}
+    output = getattr(args, "output", None)
+    if output is not None and "format" in {p.name for p in spec.params}:
+        ext = Path(output).suffix.lower().lstrip(".")
+        if ext not in ("stl", "3mf"):
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, f"output must end in .stl or .3mf, got '{Path(output).name}'")
+        if raw.setdefault("format", ext) != ext:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, f"--format {raw['format']} but -o ends in .{ext}")
+    return check(kind, raw)
 
-    params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular,
-                        min_size=args.min_size, algorithm=args.algorithm,
-                        occt_edges=args.occt_edges, own_large_faces=not args.occt_large_faces)
+
+def _write_json(path: str | None, data: dict[str, Any], indent: int = 1) -> None:
+    if path:
+        with open(path, "w") as fh:
+            json.dump(data, fh, indent=indent, default=float)
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.jobs.convert import convert, write_result
+
+    values = _job_values("convert", args)
     update, close = _progress_bar(args.quiet)
     try:
-        result = convert(args.input, params, update)
-        written = write_result(result, args.output, ascii=args.ascii)
+        result = convert(args.input, build(MeshParams, values), update)
+        written = write_result(result, args.output, ascii=values["ascii"])
     finally:
         close()
     summary = result.summary()
     summary["output"] = written
-    if args.report:
-        with open(args.report, "w") as fh:
-            json.dump(summary, fh, indent=2, default=float)
+    _write_json(args.report, summary, indent=2)
     if not args.quiet:
         m, c = result.meshing, result.checks
         state = "closed" if c.closed else f"OPEN ({c.boundary_edges} boundary, {c.nonmanifold_edges} non-manifold edges)"
@@ -83,31 +104,19 @@ def cmd_convert(args: argparse.Namespace) -> int:
     return 0
 
 
-def _build_dir(text: str) -> tuple[float, float, float]:
-    parts = [float(x) for x in text.split(",")]
-    if len(parts) != 3:
-        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"--build-dir takes x,y,z, got '{text}'")
-    return parts[0], parts[1], parts[2]
-
-
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    from amprep.geometry.measure.analysis import AnalysisParams
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.jobs.analyze import analyze_file
+    from amprep.jobs.artifacts import write_analysis
 
-    from .geometry.analysis import AnalysisParams, analyze_file
-    from .geometry.report_files import write_analysis
-    from .geometry.tessellate import MeshParams
-
-    params = AnalysisParams(layer=args.layer, build_dir=_build_dir(args.build_dir), sample_order=args.sample_order,
-                            cloud_density=args.cloud_density, bounding_box=not args.no_box)
-    mesh_params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular)
+    values = _job_values("analyze", args)
     update, close = _progress_bar(args.quiet)
     try:
-        a = analyze_file(args.input, args.stl, mesh_params, params, update)
+        a = analyze_file(args.input, args.stl, build(MeshParams, values), build(AnalysisParams, values), update)
     finally:
         close()
-    if args.report:
-        with open(args.report, "w") as fh:
-            json.dump(a.report, fh, indent=1, default=float)
+    _write_json(args.report, a.report)
     if args.out_dir:
         write_analysis(a, Path(args.out_dir))
     if not args.quiet:
@@ -129,46 +138,25 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
-def _faces(text: str | None) -> tuple[int, ...] | None:
-    if text is None:
-        return None
-    try:
-        return tuple(int(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"--faces takes face ids like 3,7, got '{text}'") from None
-
-
 def cmd_refine(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.refine.compare import RefineParams
+    from amprep.jobs.artifacts import write_refined_mesh, write_refinement
+    from amprep.jobs.refine import refine_file
 
-    from .geometry.refine import RefineParams, refine_file
-    from .geometry.report_files import write_refinement
-    from .geometry.tessellate import MeshParams
-
-    params = RefineParams(method=args.method, faces=_faces(args.faces), max_chordal=args.max_chordal,
-                          max_cusp=args.max_cusp, max_cylindricity=args.max_cylindricity, layer=args.layer,
-                          build_dir=_build_dir(args.build_dir), ratios=args.ratios, iterations=args.iterations,
-                          target=args.target,
-                          compare=not args.no_compare, max_triangles=args.max_triangles)
-    mesh_params = MeshParams(tolerance=args.tolerance, relative=args.relative, angular=args.angular)
+    values = _job_values("refine", args)
     out = Path(args.output)
-    if out.suffix.lower() not in (".stl", ".3mf"):
-        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"output must end in .stl or .3mf, got '{out.name}'")
     if not out.resolve().parent.is_dir():
         raise AmprepError(ErrorCode.WRITE_FAILED, f"cannot write {out}: no directory {out.parent}")
     update, close = _progress_bar(args.quiet)
     try:
-        r = refine_file(args.input, args.stl, mesh_params, params, update)
+        r = refine_file(args.input, args.stl, build(MeshParams, values), build(RefineParams, values), update)
     finally:
         close()
-    from .geometry.report_files import write_refined_mesh
-
-    write_refined_mesh(r, out, args.ascii)
-    if args.report:
-        with open(args.report, "w") as fh:
-            json.dump(r.report, fh, indent=1, default=float)
+    write_refined_mesh(r, out, values["ascii"])
+    _write_json(args.report, r.report)
     if args.out_dir:
-        write_refinement(r, Path(args.out_dir), out.name, args.ascii)
+        write_refinement(r, Path(args.out_dir), out.name, values["ascii"])
     if not args.quiet:
         rep = r.report
         b, a = rep["mesh_before"], rep["mesh"]
@@ -188,8 +176,8 @@ def cmd_refine(args: argparse.Namespace) -> int:
 def cmd_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .logs import setup_logging
-    from .serve import serve
+    from amprep.logs import setup_logging
+    from amprep.serve import serve
 
     setup_logging()
     return serve(args.host, args.port, args.workers, Path(args.data), args.redis_url or os.environ.get("AMPREP_REDIS_URL"),
@@ -206,7 +194,7 @@ def _param_value(text: str) -> object:
 def cmd_submit(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .client import Client, main_artifact
+    from amprep.client import Client, main_artifact
 
     params = json.loads(args.params) if args.params else {}
     for item in args.param or []:
@@ -248,7 +236,7 @@ def _job_line(job: dict) -> str:  # type: ignore[type-arg]
 def cmd_key(args: argparse.Namespace) -> int:
     import secrets
 
-    from .settings import hash_key
+    from amprep.settings import hash_key
 
     key = "amp_" + secrets.token_urlsafe(32)
     print(f"key (give to the client, shown once): {key}")
@@ -256,70 +244,58 @@ def cmd_key(args: argparse.Namespace) -> int:
     return 0
 
 
+#: the CLI's own options of each job command, beside the kind's parameters (jobs.params.KINDS)
+LOCAL_OPTIONS = {
+    "convert": (("-o", "--output", dict(required=True, help="OUT.stl or OUT.3mf")),
+                ("--report", dict(help="write a JSON summary here"))),
+    "analyze": (("--stl", dict(help="an STL made elsewhere, scored against the CAD INPUT")),
+                ("--report", dict(help="write report.json here")),
+                ("--out-dir", dict(help="write the report, the scored mesh, per-triangle fields and PNG plots here"))),
+    "refine": (("--stl", dict(help="refine this STL made elsewhere (placed on the CAD; written back in its own frame)")),
+               ("-o", "--output", dict(required=True, help="OUT.stl or OUT.3mf")),
+               ("--report", dict(help="write report.json here")),
+               ("--out-dir", dict(help="write the refined mesh, report, per-triangle error and the PNG plot here"))),
+}
+
+
+def _job_parser(sub: Any, kind: str, func: Callable[[argparse.Namespace], int]) -> None:
+    """The subcommand of a job kind: INPUT, the CLI's own options, and one option per parameter of the kind."""
+    spec = KINDS[kind]
+    sp = sub.add_parser(kind, help=spec.help, description=spec.help)
+    sp.add_argument("input", help=spec.input_help)
+    for *flags, kw in LOCAL_OPTIONS[kind]:
+        sp.add_argument(*flags, **kw)
+    sp.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
+    for p in spec.params:
+        if p.service_only:
+            continue
+        default = "none" if p.default is None else ",".join(map(str, p.default)) if isinstance(p.default, tuple) \
+            else ("on" if p.default else "off") if p.type == "bool" else p.default
+        text = f"{p.describe()}; default {default}".replace("%", "%%")
+        if p.type == "bool":
+            sp.add_argument(p.option, action=argparse.BooleanOptionalAction, default=None, help=text)
+        else:
+            metavar = "{" + ",".join(p.choices) + "}" if p.choices else {"vector3": "X,Y,Z", "ids": "ID,ID"}.get(
+                p.type, p.name.upper())
+            sp.add_argument(p.option, default=None, metavar=metavar, help=text)
+    sp.set_defaults(func=func)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("amprep")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="amprep", description="CAD to print-ready STL, with numbers.")
+    parser.add_argument("--version", action="version", version=f"amprep {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
-    c = sub.add_parser("convert", help="STEP/IGES/BREP/STL → closed STL or 3MF within a chord tolerance")
-    c.add_argument("input")
-    c.add_argument("-o", "--output", required=True, help="OUT.stl or OUT.3mf")
-    tol = c.add_mutually_exclusive_group()
-    tol.add_argument("--tolerance", type=float, default=0.1, help="max chord deviation in mm (default 0.1)")
-    tol.add_argument("--relative", type=float, default=None, help="tolerance as a fraction of the bounding-box diagonal")
-    c.add_argument("--angular", type=float, default=0.5, help="largest angle one segment of a curved edge turns through, radians (default 0.5)")
-    c.add_argument("--min-size", type=float, default=0.0, help="smallest triangle edge in mm (default: tolerance/10)")
-    c.add_argument("--algorithm", choices=["delabella", "watson"], default="delabella", help="OCCT mesh algorithm")
-    c.add_argument("--occt-edges", action="store_true",
-                   help="discretise every edge as OCCT does, at half the tolerance and angle (more triangles)")
-    c.add_argument("--occt-large-faces", action="store_true",
-                   help="let OCCT mesh large torus faces too (by default they are ours: faster, fewer triangles)")
-    c.add_argument("--ascii", action="store_true", help="ASCII STL instead of binary")
-    c.add_argument("--report", help="write a JSON summary here")
-    c.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
-    c.set_defaults(func=cmd_convert)
-
-    an = sub.add_parser("analyze", help="the error report: mesh checks, chordal error, cusp height, cylindricity, regularity")
-    an.add_argument("input", help="STEP/IGES/BREP (tessellated as convert does) or STL")
-    an.add_argument("--stl", help="an STL made elsewhere, scored against the CAD INPUT")
-    an.add_argument("--layer", type=float, default=0.2, help="layer thickness in mm (default 0.2)")
-    an.add_argument("--build-dir", default="0,0,1", help="build direction x,y,z (default 0,0,1)")
-    an.add_argument("--sample-order", type=int, default=6, help="chordal sampling order (default 6: 28 points)")
-    an.add_argument("--cloud-density", type=float, help="points per mm² for the bounding-box method (default (4/t)²)")
-    an.add_argument("--no-box", action="store_true", help="skip the bounding-box cusp method")
-    an_tol = an.add_mutually_exclusive_group()
-    an_tol.add_argument("--tolerance", type=float, default=0.1, help="tessellation tolerance for CAD input (mm)")
-    an_tol.add_argument("--relative", type=float, default=None)
-    an.add_argument("--angular", type=float, default=0.5)
-    an.add_argument("--report", help="write report.json here")
-    an.add_argument("--out-dir", help="write the report, the scored mesh, per-triangle fields and PNG plots here")
-    an.add_argument("--quiet", action="store_true")
-    an.set_defaults(func=cmd_analyze)
-
-    rf = sub.add_parser("refine", help="densify the curved faces whose error is too high (SMA, or VTA), keeping the mesh closed")
-    rf.add_argument("input", help="STEP/IGES/BREP")
-    rf.add_argument("--stl", help="refine this STL made elsewhere (placed on the CAD; written back in its own frame)")
-    rf.add_argument("-o", "--output", required=True, help="OUT.stl or OUT.3mf")
-    rf.add_argument("--method", choices=["sma", "vta", "adaptive"], default="sma")
-    rf.add_argument("--faces", help="CAD face ids to refine, e.g. 3,7 (else chosen by the thresholds)")
-    rf.add_argument("--max-chordal", type=float, help="refine curved faces whose mean chordal error exceeds this (mm)")
-    rf.add_argument("--max-cusp", type=float, help="refine curved faces whose mean cusp height exceeds this (mm)")
-    rf.add_argument("--max-cylindricity", type=float, help="refine cylinders whose cylindricity zone exceeds this (mm)")
-    rf.add_argument("--layer", type=float, default=0.2, help="layer thickness for the cusp height (mm)")
-    rf.add_argument("--build-dir", default="0,0,1", help="build direction x,y,z")
-    rf.add_argument("--ratios", default="3:4:3,3:4:3", help="SMA spoke a:b:c and edge p:q:p ratios")
-    rf.add_argument("--iterations", type=int, default=1, help="VTA iterations")
-    rf.add_argument("--target", type=float, help="adaptive: chordal error to reach (mm; default a tenth of the worst)")
-    rf_tol = rf.add_mutually_exclusive_group()
-    rf_tol.add_argument("--tolerance", type=float, default=0.2, help="first tessellation's tolerance without --stl (mm)")
-    rf_tol.add_argument("--relative", type=float, default=None)
-    rf.add_argument("--angular", type=float, default=0.5)
-    rf.add_argument("--ascii", action="store_true", help="ASCII STL")
-    rf.add_argument("--no-compare", action="store_true", help="skip the uniform re-tessellations and the other method")
-    rf.add_argument("--max-triangles", type=int, default=10_000_000,
-                    help="refuse a refinement predicted to output more triangles (default 10,000,000)")
-    rf.add_argument("--report", help="write report.json here")
-    rf.add_argument("--out-dir", help="write the refined mesh, report, per-triangle error and the PNG plot here")
-    rf.add_argument("--quiet", action="store_true")
-    rf.set_defaults(func=cmd_refine)
+    for kind, func in (("convert", cmd_convert), ("analyze", cmd_analyze), ("refine", cmd_refine)):
+        _job_parser(sub, kind, func)
 
     sv = sub.add_parser("serve", help="run the service on this machine: private Redis, workers and the API")
     sv.add_argument("--host", default="127.0.0.1", help="address to bind (not loopback: API keys required)")
@@ -333,7 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sb = sub.add_parser("submit", help="send a file to an amprep server and (with --wait or -o) wait for the result")
     sb.add_argument("input")
-    sb.add_argument("--kind", choices=["convert", "analyze", "refine"], required=True)
+    sb.add_argument("--kind", choices=list(KINDS), required=True)
     sb.add_argument("--stl", help="an STL made elsewhere, scored or refined against INPUT")
     sb.add_argument("--server", default="http://127.0.0.1:8000")
     sb.add_argument("--api-key", help="default: $AMPREP_API_KEY")

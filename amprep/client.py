@@ -9,9 +9,10 @@ from typing import Any
 
 import httpx
 
-from .geometry.errors import AmprepError, ErrorCode
+from amprep.errors import AmprepError, ErrorCode
+from amprep.jobs.params import KINDS
 
-MAIN_ARTIFACT = {"convert": ("part.stl", "part.3mf"), "analyze": ("report.json",), "refine": ("refined.stl",)}
+MAIN_ARTIFACT = {k.name: k.artifacts for k in KINDS.values()}
 
 
 def _raise_problem(r: httpx.Response) -> None:

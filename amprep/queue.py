@@ -5,9 +5,10 @@ from __future__ import annotations
 from celery import Celery
 from kombu import Queue
 
-from .settings import CALLBACK_QUEUE, KINDS, QUEUE_OF_KIND, Settings, get_settings
+from amprep.jobs.params import KINDS as _KINDS
+from amprep.settings import CALLBACK_QUEUE, KINDS, QUEUE_OF_KIND, Settings, get_settings
 
-TASK_OF_KIND = {kind: f"amprep.{kind}" for kind in KINDS}
+TASK_OF_KIND = {kind: _KINDS[kind].task for kind in KINDS}
 CALLBACK_TASK = "amprep.callback"
 
 

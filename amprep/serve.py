@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .geometry.errors import AmprepError, ErrorCode
+from amprep.errors import AmprepError, ErrorCode
 
 log = logging.getLogger("amprep.serve")
 
@@ -149,7 +149,7 @@ def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None 
           echo=print, run_workers: bool = True) -> int:  # type: ignore[no-untyped-def]
     """Run Redis (unless redis_url is given), the workers (unless not run_workers) and the API until SIGINT or
     SIGTERM; exit status."""
-    from .settings import get_settings
+    from amprep.settings import get_settings
 
     settings = get_settings()
     check_bind(host, bool(settings.api_keys), settings.allow_insecure_bind)

@@ -10,9 +10,11 @@ from typing import Annotated
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-KINDS = ("convert", "analyze", "refine")
+from amprep.jobs.params import KINDS as _KINDS
+
+KINDS = tuple(_KINDS)
 #: Which Celery queue each job kind goes to: a long refine never blocks conversions.
-QUEUE_OF_KIND = {"convert": "quick", "analyze": "quick", "refine": "heavy"}
+QUEUE_OF_KIND = {k.name: k.queue for k in _KINDS.values()}
 CALLBACK_QUEUE = "callbacks"
 
 

@@ -131,7 +131,7 @@ class Job:
 
     @property
     def queue(self) -> str:
-        from .settings import QUEUE_OF_KIND
+        from amprep.settings import QUEUE_OF_KIND
 
         return QUEUE_OF_KIND[self.kind]
 

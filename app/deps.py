@@ -7,7 +7,7 @@ from typing import Annotated
 from celery import Celery
 from fastapi import Depends, Header, Request
 
-from amprep.geometry.errors import ErrorCode
+from amprep.errors import ErrorCode
 from amprep.settings import Settings, hash_key
 from amprep.store import ANONYMOUS, JobStore
 

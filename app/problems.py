@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from amprep.geometry.errors import AmprepError, ErrorCode
+from amprep.errors import AmprepError, ErrorCode
 
 MEDIA_TYPE = "application/problem+json"
 log = logging.getLogger("amprep.api")

@@ -11,8 +11,8 @@ from typing import Any
 from fastapi import UploadFile
 from starlette.concurrency import run_in_threadpool
 
-from amprep.geometry.errors import AmprepError, ErrorCode
-from amprep.geometry.formats import sniff_bytes
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.formats import sniff_bytes
 
 from .problems import ApiError
 

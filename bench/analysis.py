@@ -36,8 +36,8 @@ def _faces_by_type() -> dict[str, tuple[str, object]]:
     """One face per surface type: analytic faces from cadquery solids, the largest B-spline face of CTC-02's twin."""
     import cadquery as cq
 
-    from amprep.geometry.cad import read_cad
-    from amprep.geometry.surfaces import surface_of
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.cad.surfaces import surface_of
 
     solids = {
         "plane": cq.Workplane().box(30, 20, 10),
@@ -72,7 +72,7 @@ def evaluation_rows() -> list[dict]:
     from OCP.BRepAdaptor import BRepAdaptor_Surface
     from OCP.gp import gp_Pnt
 
-    from amprep.geometry.surfaces import surface_of
+    from amprep.geometry.cad.surfaces import surface_of
 
     rows = []
     rng = np.random.default_rng(1)
@@ -104,11 +104,11 @@ def evaluation_rows() -> list[dict]:
 
 # ------------------------------------------------------------------------------------------ large analysis
 def _child(path: str, tol: float, box: bool) -> None:
-    from amprep.geometry.analysis import AnalysisParams, analyze_mesh
-    from amprep.geometry.cad import read_cad
-    from amprep.geometry.mesher import mesh_model
-    from amprep.geometry.surfaces import surface_of
-    from amprep.geometry.tessellate import MeshParams
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.cad.surfaces import surface_of
+    from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
 
     model = read_cad(path)
     t0 = time.perf_counter()

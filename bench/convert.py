@@ -53,8 +53,8 @@ def _occt_read(path: str):
 
 
 def _mesh_checks(stl: str) -> dict:
-    from amprep.geometry.checks import check_mesh
-    from amprep.geometry.io_stl import read_stl
+    from amprep.geometry.core.checks import check_mesh
+    from amprep.geometry.io.stl import read_stl
 
     c = check_mesh(read_stl(stl))
     return dict(triangles=c.triangles, boundary=c.boundary_edges, nonmanifold=c.nonmanifold_edges,
@@ -68,10 +68,11 @@ def _occt_deviation(shape, tol: float) -> float:
     from OCP.TopAbs import TopAbs_REVERSED
     from OCP.TopLoc import TopLoc_Location
 
-    from amprep.geometry.cad import model_from_shape
-    from amprep.geometry.chordal import triangle_chordal_error
-    from amprep.geometry.surfaces import surface_of
-    from amprep.geometry.tessellate import apply_trsf, triangulation_arrays, trsf_matrix
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.cad.surfaces import surface_of
+    from amprep.geometry.cad.topology import apply_trsf, trsf_matrix
+    from amprep.geometry.measure.chordal import triangle_chordal_error
+    from amprep.geometry.meshing.occt_read import triangulation_arrays
 
     worst = 0.0
     for face in model_from_shape(shape).faces:
@@ -93,8 +94,8 @@ def _occt_deviation(shape, tol: float) -> float:
 def child(tool: str, path: str, tol: float, out: str) -> dict:
     res: dict = {}
     if tool == "amprep":
-        from amprep.geometry.convert import convert, write_result
-        from amprep.geometry.tessellate import MeshParams
+        from amprep.geometry.meshing.params import MeshParams
+        from amprep.jobs.convert import convert, write_result
 
         t = time.perf_counter()
         r = convert(path, MeshParams(tolerance=tol))
@@ -239,8 +240,8 @@ def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
 
 
 def _diag(path: Path) -> float:
-    from amprep.geometry.cad import read_cad
-    from amprep.geometry.mesher import bbox_diagonal
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.meshing.pipeline import bbox_diagonal
 
     return bbox_diagonal(read_cad(path))
 
@@ -262,7 +263,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.child:
         tool, path, tol, out = args.child
-        from amprep.geometry.errors import AmprepError
+        from amprep.errors import AmprepError
 
         try:
             print(json.dumps(child(tool, path, float(tol), out)))
@@ -336,7 +337,7 @@ def write_tables(rows: list[dict], name: str = "bench_convert", argv: str = "") 
         "read → mesh → write STL; closedness from the written STL with identical-coordinate vertices; for OCCT the "
         "seconds of its STEP read and of BRepMesh alone are given too, since the speed target counts parts whose "
         "meshing takes over a second; OCCT reads with its own reader and default healing, amprep with one quadratic "
-        "repair skipped where its check finds nothing to repair, see README, Convert). "
+        "repair skipped where its check finds nothing to repair, see docs/meshing.md). "
         "`max dev / tol` is the worst sampled chordal error over all faces divided by the tolerance (n/a for "
         "cascadio and gmsh, whose output carries no (u,v)). gmsh has no chord tolerance: its size comes from "
         "curvature with elements per 2π set so a 5 mm radius gets the tolerance as sagitta.\n\n" + table + "\n")

@@ -52,10 +52,10 @@ def _face_mesh(kind: str, tol: float):
     """A solid with one big curved face, tessellated at tol: (mesh, surfaces, curved face ids)."""
     import cadquery as cq
 
-    from amprep.geometry.cad import model_from_shape
-    from amprep.geometry.mesher import mesh_model
-    from amprep.geometry.surfaces import surface_of
-    from amprep.geometry.tessellate import MeshParams
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.cad.surfaces import surface_of
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
 
     if kind == "torus":
         shape = cq.Solid.makeTorus(20, 5).wrapped
@@ -69,9 +69,9 @@ def _face_mesh(kind: str, tol: float):
 
 
 def _child_speed(kind: str, tol: float, method: str, iterations: int) -> None:
-    from amprep.geometry.analysis import face_chordal_errors
-    from amprep.geometry.sma import sma_refine
-    from amprep.geometry.vta import vta_refine
+    from amprep.geometry.measure.analysis import face_chordal_errors
+    from amprep.geometry.refine.sma import sma_refine
+    from amprep.geometry.refine.vta import vta_refine
 
     mesh, surfaces, faces = _face_mesh(kind, tol)
     if kind == "bspline":  # the single face closest to the thesis's 35 facets
@@ -115,8 +115,9 @@ def speed_rows(quick: bool) -> list[dict]:
 
 
 def _child_corpus(cad: str, stl: str, kwargs: str) -> None:
-    from amprep.geometry.refine import RefineParams, refine_file, score_mesh
-    from amprep.geometry.tessellate import MeshParams
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.refine.compare import RefineParams, score_mesh
+    from amprep.jobs.refine import refine_file
 
     t0 = time.perf_counter()
     r = refine_file(CORPUS / cad, CORPUS / stl if stl != "-" else None, MeshParams(tolerance=0.2),

@@ -21,11 +21,11 @@ CORPUS = Path(os.environ.get("AMPREP_CORPUS", ROOT.parent / "shared" / "corpus")
 
 import numpy as np  # noqa: E402
 
-from amprep.geometry.cad import read_cad  # noqa: E402
-from amprep.geometry.formats import CAD_FORMATS, sniff_path  # noqa: E402
-from amprep.geometry.mesher import mesh_model  # noqa: E402
-from amprep.geometry.quality import MEASURES, regularity, summarize  # noqa: E402
-from amprep.geometry.tessellate import MeshParams  # noqa: E402
+from amprep.geometry.cad.read import read_cad  # noqa: E402
+from amprep.geometry.core.formats import CAD_FORMATS, sniff_path  # noqa: E402
+from amprep.geometry.measure.regularity import MEASURES, regularity, summarize  # noqa: E402
+from amprep.geometry.meshing.params import MeshParams  # noqa: E402
+from amprep.geometry.meshing.pipeline import mesh_model  # noqa: E402
 
 # Paper 000 (../shared/seeds/), Table 2 at ε = 0.34 mm: bins [0,.25) [.25,.5) [.5,.75) [.75,1] and the mean.
 PAPER_TABLE2 = {

@@ -119,7 +119,7 @@ def main() -> None:
             subprocess.run([sys.executable, "-m", "amprep", "convert", str(part), "-o", str(out), "--quiet"],
                            check=True, cwd=ROOT)
             cli.append(time.perf_counter() - t)
-        lib_code = ("import time,sys; from amprep.geometry.convert import convert, write_result; convert(sys.argv[1])\n"
+        lib_code = ("import time,sys; from amprep.jobs.convert import convert, write_result; convert(sys.argv[1])\n"
                     "for _ in range(int(sys.argv[3])):\n"
                     "    t=time.perf_counter(); r=convert(sys.argv[1]); write_result(r, sys.argv[2]);"
                     " print(time.perf_counter()-t)")

@@ -24,9 +24,9 @@ def _preload(**_: object) -> None:
     """
     import importlib
 
-    for name in ("amprep.runner", "amprep.geometry.convert", "amprep.geometry.report", "amprep.geometry.fallback",
-                 "manifold3d", "lib3mf", "triangle", "scipy.sparse.csgraph"):
+    for name in ("amprep.jobs.runner", "amprep.jobs.convert", "amprep.jobs.analyze", "amprep.jobs.refine",
+                 "amprep.geometry.meshing.face_mesher", "manifold3d", "lib3mf", "triangle", "scipy.sparse.csgraph"):
         importlib.import_module(name)
-    from amprep.geometry.chordal import load_kernels
+    from amprep.geometry.measure.chordal import load_kernels
 
     load_kernels()  # numba and the compiled kernels: a long-lived worker uses them for every job

@@ -15,11 +15,12 @@ import httpx
 from celery import Task
 from celery.exceptions import SoftTimeLimitExceeded, TimeLimitExceeded
 
-from amprep.geometry.convert import provenance
-from amprep.geometry.errors import AmprepError, ErrorCode
+from amprep.errors import AmprepError, ErrorCode
+from amprep.jobs.common import provenance
+from amprep.jobs.params import KINDS, JobKind
+from amprep.jobs.runner import run
 from amprep.logs import job_id_var
 from amprep.queue import CALLBACK_TASK
-from amprep.runner import run
 from amprep.settings import get_settings
 from amprep.store import JobStore, now
 
@@ -118,19 +119,17 @@ def run_job(job_id: str) -> None:
     log.info("succeeded")
 
 
-@app.task(name="amprep.convert", base=JobTask)
-def convert(job_id: str) -> None:
-    run_job(job_id)
+def _job_task(kind: JobKind) -> Task:
+    """The kind's task: its name from jobs.params, its body run_job."""
+
+    def job(job_id: str) -> None:
+        run_job(job_id)
+
+    job.__name__ = job.__qualname__ = kind.name
+    return app.task(name=kind.task, base=JobTask)(job)
 
 
-@app.task(name="amprep.analyze", base=JobTask)
-def analyze(job_id: str) -> None:
-    run_job(job_id)
-
-
-@app.task(name="amprep.refine", base=JobTask)
-def refine(job_id: str) -> None:
-    run_job(job_id)
+TASKS = {name: _job_task(kind) for name, kind in KINDS.items()}
 
 
 def signature(secret: str, body: bytes) -> str:

@@ -9,7 +9,7 @@ from fastapi.responses import JSONResponse, PlainTextResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from starlette.concurrency import run_in_threadpool
 
-from amprep.geometry.errors import ErrorCode
+from amprep.errors import ErrorCode
 
 from ..deps import OwnerDep
 from ..problems import problem

@@ -11,7 +11,8 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from pydantic import ValidationError
 from sse_starlette.sse import EventSourceResponse
 
-from amprep.geometry.errors import ErrorCode
+from amprep.errors import AmprepError, ErrorCode
+from amprep.jobs.params import check
 from amprep.queue import CALLBACK_TASK, TASK_OF_KIND
 from amprep.store import TERMINAL, Job, fingerprint, new_job_id, now
 
@@ -61,7 +62,11 @@ def _params(kind: str, raw: str) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ApiError(422, ErrorCode.INVALID_REQUEST, "params: must be a JSON object")
     try:
-        return PARAMS_MODEL[kind].model_validate(data).model_dump(mode="json")
+        values = PARAMS_MODEL[kind].model_validate(data).model_dump(mode="json")
+        check(kind, values, service=True)  # what a schema cannot say (a zero build direction), as the CLI checks it
+        return values
+    except AmprepError as exc:
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, f"params.{exc.message}") from None
     except ValidationError as exc:
         errors = [{"loc": ["params", *e["loc"]], "msg": e["msg"], "type": e["type"]} for e in exc.errors()]
         first = errors[0]

@@ -7,16 +7,17 @@ import json
 import numpy as np
 import pytest
 
-from amprep.geometry import cusp
-from amprep.geometry.analysis import AnalysisParams, analyze_file, analyze_mesh, face_chordal_errors
-from amprep.geometry.cad import model_from_shape
-from amprep.geometry.cylindricity import minimum_zone
-from amprep.geometry.defects import boundary_loops, nonmanifold_vertices, self_intersections
-from amprep.geometry.mesh import FaceInfo, Mesh
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.quality import bin_counts, regularity, summarize
-from amprep.geometry.surfaces import Surface, cylinder, surface_of
-from amprep.geometry.tessellate import MeshParams
+from amprep.geometry.cad.read import model_from_shape
+from amprep.geometry.cad.surfaces import Surface, cylinder, surface_of
+from amprep.geometry.core.mesh import FaceInfo, Mesh
+from amprep.geometry.measure import cusp
+from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh, face_chordal_errors
+from amprep.geometry.measure.cylindricity import minimum_zone
+from amprep.geometry.measure.defects import boundary_loops, nonmanifold_vertices, self_intersections
+from amprep.geometry.measure.regularity import bin_counts, regularity, summarize
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+from amprep.jobs.analyze import analyze_file
 from tests.conftest import corpus
 
 Z = np.array([0.0, 0.0, 1.0])
@@ -253,7 +254,7 @@ def test_cli_analyze_writes_report_plots_and_fields(tmp_path):
 def test_self_intersection_broad_phase_finds_what_brute_force_finds(reference_solids):
     """Two overlapping spheres: the BVH broad phase + narrow phase find exactly the crossing pairs that testing
     every pair of triangles finds."""
-    from amprep.geometry.defects import triangles_cross
+    from amprep.geometry.measure.defects import triangles_cross
 
     a = _mesh_of(reference_solids["sphere"], 0.5)
     v = np.concatenate([a.vertices, a.vertices + [7.0, 3.0, 1.0]])

@@ -7,12 +7,14 @@ from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.GeomAbs import GeomAbs_Circle
 from OCP.TopLoc import TopLoc_Location
 
-from amprep.geometry import brepmesh
-from amprep.geometry.brepmesh import EDGE_TARGET, is_ruled, run_brepmesh
-from amprep.geometry.cad import model_from_shape, read_cad
-from amprep.geometry.checks import check_mesh, manifold3d_accepts
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.tessellate import MeshParams, Topology, face_edges, triangulation_arrays
+from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.cad.topology import Topology, face_edges
+from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.meshing import brepmesh
+from amprep.geometry.meshing.brepmesh import EDGE_TARGET, is_ruled, run_brepmesh
+from amprep.geometry.meshing.occt_read import triangulation_arrays
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
 from tests.conftest import corpus
 
 

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from amprep.geometry.cad import read_cad
-from amprep.geometry.errors import AmprepError, ErrorCode
-from amprep.geometry.mesher import bbox_diagonal
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.read import read_cad
+from amprep.geometry.meshing.pipeline import bbox_diagonal
 from tests.conftest import corpus
 
 
@@ -85,7 +85,7 @@ def _one_shell_per_face(solid):
     from OCP.TopAbs import TopAbs_FACE
     from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Shell
 
-    from amprep.geometry.tessellate import explore
+    from amprep.geometry.cad.topology import explore
 
     b = BRep_Builder()
     comp = TopoDS_Compound()
@@ -113,10 +113,10 @@ def test_step_surface_model_with_a_shell_per_face_is_sewn_closed(tmp_path):
     import cadquery as cq
     from OCP.TopAbs import TopAbs_SHELL
 
-    from amprep.geometry.cad import _indexed, free_edge_count, read_shape
-    from amprep.geometry.checks import check_mesh, manifold3d_accepts
-    from amprep.geometry.mesher import mesh_model
-    from amprep.geometry.tessellate import MeshParams
+    from amprep.geometry.cad.read import _indexed, free_edge_count, read_shape
+    from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
 
     block = cq.Workplane("XY").box(20, 12, 6).faces(">Z").workplane().hole(5).val().wrapped
     path = _write_step(_one_shell_per_face(block), tmp_path / "shells.step")
@@ -136,7 +136,7 @@ def test_loose_faces_are_sewn_and_solids_beside_them_kept(tmp_path):
     from OCP.BRep import BRep_Builder
     from OCP.TopoDS import TopoDS_Compound
 
-    from amprep.geometry.cad import free_edge_count
+    from amprep.geometry.cad.read import free_edge_count
 
     solid = cq.Workplane("XY").box(10, 10, 10).val().wrapped
     loose = _one_shell_per_face(cq.Workplane("XY").cylinder(8, 3).translate((30, 0, 0)).val().wrapped)
@@ -157,8 +157,8 @@ def test_only_occt_failures_become_unreadable_cad(monkeypatch):
     passes unchanged (it was reported as unreadable_cad, and the job failed with the wrong code)."""
     from OCP.gp import gp_Dir
 
-    from amprep.geometry import cad
-    from amprep.geometry.errors import is_occt_failure
+    from amprep.errors import is_occt_failure
+    from amprep.geometry.cad import read as cad
 
     with pytest.raises(Exception) as occt:
         gp_Dir(0, 0, 0)

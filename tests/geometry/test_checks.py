@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from amprep.geometry.checks import duplicate_count, edge_incidence
+from amprep.geometry.core.checks import duplicate_count
+from amprep.geometry.core.edges import edge_incidence
 
 
 def _reference_incidence(t):

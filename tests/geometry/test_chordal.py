@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from amprep.geometry.chordal import barycentric_grid, triangle_chordal_error
-from amprep.geometry.surfaces import cylinder, plane
+from amprep.geometry.cad.surfaces import cylinder, plane
+from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error
 
 
 def test_grid_has_28_points_at_order_6_and_sums_to_one():
@@ -36,7 +36,7 @@ def test_plane_bound_is_zero_on_the_plane_and_the_offset_off_it():
 
 
 def _faces_of(model, mesh):
-    from amprep.geometry.surfaces import surface_of
+    from amprep.geometry.cad.surfaces import surface_of
 
     for f in np.unique(mesh.face_ids):
         sel = mesh.face_ids == f
@@ -47,10 +47,10 @@ def _faces_of(model, mesh):
 def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(reference_solids, source):
     """The fused numba kernels (closed forms; rational B-splines with periodic wrap, CTC-02's face 54) against the
     numpy evaluate-then-project path, on every face, forced on small calls; and they do run there."""
-    from amprep.geometry import chordal
-    from amprep.geometry.cad import model_from_shape, read_cad
-    from amprep.geometry.mesher import mesh_model
-    from amprep.geometry.tessellate import MeshParams
+    from amprep.geometry.cad.read import model_from_shape, read_cad
+    from amprep.geometry.measure import chordal
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
     from tests.conftest import corpus
 
     models = ([model_from_shape(s) for s in reference_solids.values()] if source == "reference"
@@ -74,7 +74,7 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
 def test_many_small_numpy_evaluations_add_up_to_loading_the_kernels(monkeypatch):
     """Refinement evaluates in many small calls; once their numpy work passes NUMPY_BUDGET the compiled kernels are
     loaded (each call alone stays under COMPILED_MIN_POINTS, so a per-call rule never would)."""
-    from amprep.geometry import bspline
+    from amprep.geometry.cad import bspline
 
     monkeypatch.setattr(bspline, "_numpy_work", 0)
     monkeypatch.setattr(bspline, "NUMPY_BUDGET", 10)
@@ -87,10 +87,10 @@ def test_a_stop_value_bounds_only_triangles_over_it_and_serial_kernels_equal_par
     """Every curved face of a real part, measured in one call (the parallel kernels, over BLOCK triangles) and in
     calls of a few triangles (the serial kernels): the same values, bit for bit. With a stop at the median, values
     at or under it are exact, values over it are over it and at most the true ones, and exact_over restores them."""
-    from amprep.geometry import _chordal_kernel, chordal
-    from amprep.geometry.cad import read_cad
-    from amprep.geometry.mesher import mesh_model
-    from amprep.geometry.tessellate import MeshParams
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.measure import _chordal_kernel, chordal
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
     from tests.conftest import corpus
 
     chordal.load_kernels()

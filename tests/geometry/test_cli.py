@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from amprep.geometry.io_stl import read_stl
+from amprep.geometry.io.stl import read_stl
 from tests.conftest import corpus
 
 
@@ -91,15 +91,15 @@ def test_occt_edges_gives_occts_count_and_the_default_fewer(tmp_path):
     assert counts[False] < 0.8 * counts[True]
 
 
-def test_large_torus_faces_are_ours_unless_occt_large_faces(tmp_path):
+def test_large_torus_faces_are_ours_unless_no_own_large_faces(tmp_path):
     """A torus R20 r5 STEP at 0.01 mm: its face is meshed by us (fallback reason large_curved, fewer triangles);
-    --occt-large-faces leaves it to BRepMesh; both closed and within tolerance, and the report says which."""
+    --no-own-large-faces leaves it to BRepMesh; both closed and within tolerance, and the report says which."""
     import cadquery as cq
 
     step = tmp_path / "torus.step"
     cq.exporters.export(cq.Workplane().add(cq.Solid.makeTorus(20, 5)), str(step))
     counts = {}
-    for flag in ([], ["--occt-large-faces"]):
+    for flag in ([], ["--no-own-large-faces"]):
         out, report = tmp_path / f"t{len(flag)}.stl", tmp_path / f"t{len(flag)}.json"
         r = run("convert", str(step), "-o", str(out), "--tolerance", "0.01", "--report", str(report), *flag)
         assert r.returncode == 0, r.stderr
@@ -114,7 +114,7 @@ def test_large_torus_faces_are_ours_unless_occt_large_faces(tmp_path):
 def test_a_bug_of_ours_is_one_line_internal_error_exit_2(tmp_path):
     """An unexpected exception (forced here by replacing convert with one that divides by zero) is one line with
     the internal_error code and exit status 2; AMPREP_DEBUG=1 shows the traceback."""
-    code = ("import sys, amprep.geometry.convert as c\n"
+    code = ("import sys, amprep.jobs.convert as c\n"
             "c.convert = lambda *a, **k: 1 / 0\n"
             "from amprep.cli import main\n"
             "sys.exit(main(sys.argv[1:]))\n")

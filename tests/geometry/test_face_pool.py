@@ -6,12 +6,12 @@ import time
 import numpy as np
 import pytest
 
-from amprep.geometry import face_pool
-from amprep.geometry.cad import read_cad
-from amprep.geometry.chordal import load_kernels
-from amprep.geometry.errors import AmprepError, ErrorCode
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.tessellate import MeshParams
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.read import read_cad
+from amprep.geometry.measure.chordal import load_kernels
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+from amprep.geometry.parallel import face_pool
 from tests.conftest import corpus
 
 

@@ -8,21 +8,17 @@ import sys
 import numpy as np
 import pytest
 
-from amprep.geometry import face_pool
-from amprep.geometry.brepmesh import run_brepmesh
-from amprep.geometry.cad import read_cad
-from amprep.geometry.chordal import load_kernels
-from amprep.geometry.first_look import _Chunk, first_look, patch_error, rejected
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.patch_refine import flat_triangles
-from amprep.geometry.surfaces import surface_of
-from amprep.geometry.tessellate import (
-    MeshParams,
-    Topology,
-    bulk_triangulation_arrays,
-    check_patch_boundary,
-    extract_patch,
-)
+from amprep.geometry.cad.read import read_cad
+from amprep.geometry.cad.surfaces import surface_of
+from amprep.geometry.cad.topology import Topology
+from amprep.geometry.measure.chordal import load_kernels
+from amprep.geometry.meshing.brepmesh import run_brepmesh
+from amprep.geometry.meshing.local_refine import flat_triangles
+from amprep.geometry.meshing.occt_check import _Chunk, first_look, patch_error, rejected
+from amprep.geometry.meshing.occt_read import bulk_triangulation_arrays, check_patch_boundary, extract_patch
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+from amprep.geometry.parallel import face_pool
 from tests.conftest import corpus
 
 

@@ -2,8 +2,8 @@ import struct
 
 import pytest
 
-from amprep.geometry.errors import AmprepError, ErrorCode
-from amprep.geometry.formats import sniff_bytes, sniff_path
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.formats import sniff_bytes, sniff_path
 from tests.conftest import CAD_FILES, STL_FILES, corpus
 
 EXPECTED = {".step": "step", ".stp": "step", ".iges": "iges", ".igs": "iges", ".brep": "brep", ".stl": "stl"}

@@ -1,13 +1,13 @@
 import numpy as np
 import pytest
 
-from amprep.geometry.cad import model_from_shape
-from amprep.geometry.checks import check_mesh
-from amprep.geometry.errors import AmprepError, ErrorCode
-from amprep.geometry.io_3mf import read_3mf_objects, write_3mf
-from amprep.geometry.io_stl import read_stl, stl_bytes, write_stl
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.tessellate import MeshParams
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.read import model_from_shape
+from amprep.geometry.core.checks import check_mesh
+from amprep.geometry.io.stl import read_stl, stl_bytes, write_stl
+from amprep.geometry.io.threemf import read_3mf_objects, write_3mf
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
 from tests.conftest import STL_FILES, corpus
 
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from amprep.geometry.cad import model_from_shape, read_cad
-from amprep.geometry.checks import check_mesh, manifold3d_accepts
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.tessellate import MeshParams
+from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
 from tests.conftest import CAD_FILES, OPEN_CAD, corpus
 
 # distance of a point to the exact surface, independent of the (u,v) sampling our mesher uses
@@ -114,7 +114,7 @@ def test_both_occt_algorithms(reference_solids, algorithm):
 @pytest.mark.parametrize("bad", [dict(tolerance=0), dict(tolerance=-1), dict(tolerance=float("nan")),
                                  dict(relative=2.0), dict(angular=0), dict(algorithm="magic")])
 def test_invalid_parameters(reference_solids, bad):
-    from amprep.geometry.errors import AmprepError, ErrorCode
+    from amprep.errors import AmprepError, ErrorCode
 
     with pytest.raises(AmprepError) as err:
         mesh_model(model_from_shape(reference_solids["sphere"]), MeshParams(**bad))
@@ -124,7 +124,7 @@ def test_invalid_parameters(reference_solids, bad):
 def test_tessellated_only_ap242_keeps_the_files_topology():
     """FTC-08 has no exact surfaces: its stored triangles share the file's coordinates. The solid's shell comes
     out closed and outward (it is stored inside-out); the file's one loose face stays open and is reported."""
-    from amprep.geometry.checks import shell_labels, signed_volume
+    from amprep.geometry.core.checks import shell_labels, signed_volume
 
     r = mesh_model(read_cad(corpus("nist_ftc08_tessellated_ap242.stp")), MeshParams(tolerance=0.1))
     mesh = r.mesh
@@ -142,9 +142,9 @@ def test_tessellated_only_ap242_keeps_the_files_topology():
 def test_slivers_thinner_than_the_degenerate_check_send_the_face_to_the_fallback():
     """OCCT leaves a 36 nm high sliver on two B-spline faces of CTC-02's twin at 0.01 mm: not a needle by its own
     edge (area/L² ≈ 5e-4) but degenerate for the output check (area ≤ 1e-12 · diagonal²), so the face is re-meshed."""
-    from amprep.geometry.checks import DEGENERATE_REL_AREA
-    from amprep.geometry.patch_refine import flat_triangles
-    from amprep.geometry.tessellate import FacePatch
+    from amprep.geometry.core.checks import DEGENERATE_REL_AREA
+    from amprep.geometry.meshing.local_refine import flat_triangles
+    from amprep.geometry.meshing.occt_read import FacePatch
 
     nodes = np.array([[174.90300131, -229.69594043, 86.50283839], [174.90164246, -229.71095813, 86.51537158],
                       [174.9043103, -229.68139348, 86.4906021], [175.0, -229.0, 86.0]])
@@ -164,15 +164,15 @@ def test_bulk_triangulation_read_equals_the_node_by_node_read(name, monkeypatch)
     from OCP.BRep import BRep_Tool
     from OCP.TopLoc import TopLoc_Location
 
-    from amprep.geometry import tessellate
-    from amprep.geometry.brepmesh import run_brepmesh
-    from amprep.geometry.cad import read_cad
-    from amprep.geometry.tessellate import bulk_triangulation_arrays, triangulation_arrays
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.meshing import occt_read
+    from amprep.geometry.meshing.brepmesh import run_brepmesh
+    from amprep.geometry.meshing.occt_read import bulk_triangulation_arrays, triangulation_arrays
 
     model = read_cad(corpus(name))
     run_brepmesh(model.shape, 0.05, MeshParams(tolerance=0.05))
     slow = []
-    monkeypatch.setattr(tessellate, "triangulation_arrays", lambda t: slow.append(t))
+    monkeypatch.setattr(occt_read, "triangulation_arrays", lambda t: slow.append(t))
     bulk = bulk_triangulation_arrays(model.faces)
     monkeypatch.undo()
     assert not slow
@@ -193,21 +193,21 @@ def test_a_close_call_is_measured_again_on_a_finer_grid_instead_of_re_meshed(ref
     the band where that grid could miss the true maximum. The band's triangles are measured on the order-24 grid,
     which keeps the doubt under FINE_MARGIN, so OCCT's mesh is kept (its triangle count, no fallback); a face whose
     finer measure leaves the doubt is re-meshed."""
-    from amprep.geometry import mesher
-    from amprep.geometry.brepmesh import run_brepmesh
+    from amprep.geometry.meshing import enforce
+    from amprep.geometry.meshing.brepmesh import run_brepmesh
 
     model = model_from_shape(reference_solids["torus"])
     params = MeshParams(tolerance=0.001, own_large_faces=False)  # the torus is OCCT's to mesh here
     res = mesh_model(model, params)
     run_brepmesh(model.shape, 0.001, params)
-    from amprep.geometry.tessellate import bulk_triangulation_arrays
+    from amprep.geometry.meshing.occt_read import bulk_triangulation_arrays
 
     occt_triangles = sum(len(b[2]) for b in bulk_triangulation_arrays(model.faces) if b is not None)
     assert res.fallback_faces == {} and res.mesh.n_triangles == occt_triangles
-    assert mesher.TRIGGER_MARGIN < res.max_error / 0.001 <= mesher.FINE_MARGIN
-    monkeypatch.setattr(mesher, "FINE_MARGIN", 0.99)  # the finer measure no longer clears the doubt: re-meshed
+    assert enforce.TRIGGER_MARGIN < res.max_error / 0.001 <= enforce.FINE_MARGIN
+    monkeypatch.setattr(enforce, "FINE_MARGIN", 0.99)  # the finer measure no longer clears the doubt: re-meshed
     strict = mesh_model(model, params)
-    assert strict.fallback_faces == {0: "tolerance"} and strict.max_error <= 0.001 * mesher.FINE_MARGIN
+    assert strict.fallback_faces == {0: "tolerance"} and strict.max_error <= 0.001 * enforce.FINE_MARGIN
 
 
 def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
@@ -217,10 +217,12 @@ def test_fallback_points_keep_apart_so_float32_cannot_merge_them():
     MIN_SPACING × tolerance from every other node."""
     from scipy.spatial import cKDTree
 
-    from amprep.geometry import fallback, uv_cdt
-    from amprep.geometry.brepmesh import run_brepmesh
-    from amprep.geometry.surfaces import surface_of
-    from amprep.geometry.tessellate import Topology, extract_patch
+    from amprep.geometry.cad.surfaces import surface_of
+    from amprep.geometry.cad.topology import Topology
+    from amprep.geometry.meshing import face_mesher as fallback
+    from amprep.geometry.meshing import uv_cdt
+    from amprep.geometry.meshing.brepmesh import run_brepmesh
+    from amprep.geometry.meshing.occt_read import extract_patch
 
     pts = np.array([[0.0, 0.0], [1.0, 0.0]])
     new = np.array([[0.0, 5e-6], [0.5, 0.5], [0.5, 0.5 + 5e-6], [2.0, 2.0]])
@@ -244,8 +246,8 @@ def test_triangles_that_float32_rounding_makes_degenerate_are_counted_and_said()
     """A sliver 1.4e-5 mm high at 300–400 mm from the origin: not degenerate in float64, flat once its corners are
     rounded to float32 as STL stores them (the spacing of float32 there is 3e-5 mm); the same sliver near the origin
     survives the rounding."""
-    from amprep.geometry.checks import degenerate_mask, float32_degenerate_count
-    from amprep.geometry.mesh import Mesh
+    from amprep.geometry.core.checks import degenerate_mask, float32_degenerate_count
+    from amprep.geometry.core.mesh import Mesh
 
     base = np.array([400.0, 300.0, 100.0])
     verts = base + np.array([[0, 0, 0], [0.25, 0, 0], [0.125, 1.4e-5, 0], [0, 5.0, 5.0]])

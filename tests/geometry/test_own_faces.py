@@ -3,12 +3,13 @@
 import numpy as np
 import pytest
 
-from amprep.geometry import mesher, own_faces
-from amprep.geometry.cad import model_from_shape, read_cad
-from amprep.geometry.checks import check_mesh, manifold3d_accepts
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.own_faces import expected_triangles
-from amprep.geometry.tessellate import MeshParams
+from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.meshing import large_faces as own_faces
+from amprep.geometry.meshing import prepare
+from amprep.geometry.meshing.large_faces import expected_triangles
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
 from tests.conftest import corpus
 
 
@@ -90,5 +91,5 @@ def test_own_faces_are_never_left_a_stale_triangulation(reference_solids):
 
 def test_switching_it_off_leaves_every_face_to_brepmesh(reference_solids):
     model = model_from_shape(reference_solids["torus"])
-    assert mesher.own_faces(model, MeshParams(tolerance=0.01), 0.01) == [0]
-    assert mesher.own_faces(model, MeshParams(tolerance=0.01, own_large_faces=False), 0.01) == []
+    assert prepare.own_faces(model, MeshParams(tolerance=0.01), 0.01) == [0]
+    assert prepare.own_faces(model, MeshParams(tolerance=0.01, own_large_faces=False), 0.01) == []

@@ -3,15 +3,18 @@
 import numpy as np
 import pytest
 
-from amprep.geometry import mesher
-from amprep.geometry.brepmesh import run_brepmesh
-from amprep.geometry.cad import model_from_shape, read_cad
-from amprep.geometry.checks import check_mesh, manifold3d_accepts
-from amprep.geometry.chordal import triangle_chordal_error
-from amprep.geometry.mesher import mesh_model, patch_error
-from amprep.geometry.patch_refine import refine_patch
-from amprep.geometry.surfaces import surface_of
-from amprep.geometry.tessellate import MeshParams, Topology, extract_patch
+from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.cad.surfaces import surface_of
+from amprep.geometry.cad.topology import Topology
+from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.measure.chordal import triangle_chordal_error
+from amprep.geometry.meshing import enforce, prepare
+from amprep.geometry.meshing.brepmesh import run_brepmesh
+from amprep.geometry.meshing.local_refine import refine_patch
+from amprep.geometry.meshing.occt_check import patch_error
+from amprep.geometry.meshing.occt_read import extract_patch
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
 from tests.conftest import corpus
 
 
@@ -84,9 +87,9 @@ def test_forced_local_refinement_gives_closed_solids_within_tolerance(reference_
     """OCCT's face interiors meshed 3× too coarse (edges at the tolerance, so no edge is split) and every face over
     tolerance refined locally, whatever its size or share of bad triangles (the mesher keeps that for large faces
     with few of them): the solid is closed, oriented and within tolerance."""
-    monkeypatch.setattr(mesher, "LOCAL_MIN_TRIANGLES", 0)
-    monkeypatch.setattr(mesher, "LOCAL_MAX_BAD", 1.0)
-    monkeypatch.setattr(mesher, "run_brepmesh", _coarse_interior_brepmesh)
+    monkeypatch.setattr(enforce, "LOCAL_MIN_TRIANGLES", 0)
+    monkeypatch.setattr(enforce, "LOCAL_MAX_BAD", 1.0)
+    monkeypatch.setattr(prepare, "run_brepmesh", _coarse_interior_brepmesh)
     model = read_cad(corpus(name)) if "." in name else model_from_shape(reference_solids[name])
     r = mesh_model(model, MeshParams(tolerance=0.02))
     assert "refined" in {f.meshed_by for f in r.mesh.faces}
@@ -122,8 +125,8 @@ def test_inputs_that_crash_triangle_are_refused_or_cleaned_first():
 
     code = """
 import numpy as np
-from amprep.geometry.errors import AmprepError
-from amprep.geometry.uv_cdt import triangulate_pslg
+from amprep.errors import AmprepError
+from amprep.geometry.meshing.uv_cdt import triangulate_pslg
 square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
 ring = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
 pinched = np.vstack([square, [[0.5, 0.5], [0.5, 0.5]]])
@@ -146,8 +149,8 @@ def test_flat_triangle_at_an_apex_is_flipped_away_when_the_flip_keeps_the_tolera
     the (u,v)-valid triangle (apex, A, B) with A and B on one generator is flat (a zero-area triangle in the STL,
     seen on CTC-02's B-spline twin). Flipping its longest side with the neighbour's gives two proper triangles,
     oriented as before; a flip that would break the tolerance is not made."""
-    from amprep.geometry.patch_refine import flat_triangles, flip_flat_triangles
-    from amprep.geometry.tessellate import FacePatch
+    from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles
+    from amprep.geometry.meshing.occt_read import FacePatch
 
     model = model_from_shape(reference_solids["cone"])
     face = next(f for f in model.faces if surface_of(f).surface_type == "cone")
@@ -171,7 +174,7 @@ def test_flat_triangle_at_an_apex_is_flipped_away_when_the_flip_keeps_the_tolera
 def test_bspline_twin_at_a_hundredth_is_closed_with_no_flat_triangle():
     """CTC-02's B-spline-only twin at 0.01 mm: its cone-like B-spline faces have apexes, where our refinement made
     three flat triangles before flip_flat_triangles; the part must come out closed, with none, within tolerance."""
-    from amprep.geometry.checks import float32_degenerate_count
+    from amprep.geometry.core.checks import float32_degenerate_count
 
     r = mesh_model(read_cad(corpus("nist_ctc02_bspline_ap203.stp")), MeshParams(tolerance=0.01))
     c = check_mesh(r.mesh)

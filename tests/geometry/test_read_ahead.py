@@ -6,13 +6,13 @@ import os
 import numpy as np
 import pytest
 
-from amprep.geometry import read_ahead
-from amprep.geometry.brepmesh import occt_pool_untouched, run_brepmesh
-from amprep.geometry.convert import FORK_CHECKS_MIN, convert, output_checks
-from amprep.geometry.errors import AmprepError, ErrorCode
-from amprep.geometry.forked import Forked, fork_available
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.tessellate import MeshParams
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.meshing import read_ahead
+from amprep.geometry.meshing.brepmesh import occt_pool_untouched, run_brepmesh
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_prepared
+from amprep.geometry.parallel.forked import Forked, fork_available
+from amprep.jobs.convert import FORK_CHECKS_MIN, convert, output_checks
 from tests.conftest import corpus
 
 needs_fork = pytest.mark.skipif(not fork_available(), reason="no fork or a single core here")
@@ -55,7 +55,7 @@ def test_reading_and_meshing_in_a_child_gives_the_same_mesh(monkeypatch, name, t
     """The shape comes back through OCCT's binary BREP with its triangulations and edge polygons: welded by topology
     it is the mesh of reading and meshing here, bit for bit, closed, with the unit and tolerance of the file."""
     params = MeshParams(tolerance=tol, parallel=False)
-    here, tol_here = read_ahead.read_and_mesh(corpus(name), "step", params)
+    here = read_ahead.read_and_prepare(corpus(name), "step", params)
     monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)  # forks only while the kernels are not loaded
     calls = []
     real = read_ahead.Forked
@@ -66,12 +66,13 @@ def test_reading_and_meshing_in_a_child_gives_the_same_mesh(monkeypatch, name, t
         return job
 
     monkeypatch.setattr(read_ahead, "Forked", counting)
-    there, tol_there = read_ahead.read_and_mesh_ahead(corpus(name), "step", params)
+    there = read_ahead.read_and_prepare_ahead(corpus(name), "step", params)
     assert calls == [True]
-    assert tol_there == tol_here and there.units == here.units and len(there.faces) == len(here.faces)
-    assert there.face_solid == here.face_solid
-    a = mesh_model(here, params, meshed_at=tol_here)
-    b = mesh_model(there, params, meshed_at=tol_there)
+    assert there.tolerance == here.tolerance and there.own == here.own
+    assert there.model.units == here.model.units and len(there.model.faces) == len(here.model.faces)
+    assert there.model.face_solid == here.model.face_solid
+    a = mesh_prepared(here, params, None)
+    b = mesh_prepared(there, params, None)
     assert np.array_equal(a.mesh.vertices, b.mesh.vertices)
     assert np.array_equal(a.mesh.triangles, b.mesh.triangles)
     assert a.fallback_faces == b.fallback_faces
@@ -83,7 +84,7 @@ def test_an_unreadable_file_read_in_a_child_is_unreadable_cad(monkeypatch, tmp_p
     bad.write_text("ISO-10303-21;\nHEADER;\nENDSEC;\nDATA;\n#1=FOO(;\nENDSEC;\nEND-ISO-10303-21;\n")
     monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)
     with pytest.raises(AmprepError) as exc:
-        read_ahead.read_and_mesh_ahead(bad, "step", MeshParams())
+        read_ahead.read_and_prepare_ahead(bad, "step", MeshParams())
     assert exc.value.code in (ErrorCode.UNREADABLE_CAD, ErrorCode.EMPTY_MODEL)
 
 
@@ -103,8 +104,8 @@ def test_checks_beside_manifold3d_equal_the_checks_here():
 
 
 def _forked_in_child(queue):
-    from amprep.geometry.face_pool import can_fork
-    from amprep.geometry.forked import Forked
+    from amprep.geometry.parallel.face_pool import can_fork
+    from amprep.geometry.parallel.forked import Forked
 
     job = Forked(os.getpid)
     queue.put((job.forked, job.result() == os.getpid(), can_fork()))
@@ -131,7 +132,7 @@ def test_warming_stops_after_importing_numba_when_the_file_is_read_already(stop,
     import subprocess
     import sys
 
-    code = (f"import sys; from amprep.geometry import chordal; chordal.warm_kernels(stop=lambda: {stop}); "
+    code = (f"import sys; from amprep.geometry.measure import chordal; chordal.warm_kernels(stop=lambda: {stop}); "
             "print(chordal.kernels_loaded(), 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
@@ -150,8 +151,8 @@ def test_kernels_are_warmed_at_once_for_a_large_file_later_for_a_small_one(monke
     calls = []
     start = time.monotonic()
     monkeypatch.setattr(read_ahead, "warm_kernels", lambda stop: calls.append((time.monotonic() - start, stop())))
-    read_ahead.read_and_mesh_ahead(corpus("nist_ctc02_ap242.stp"), "step", MeshParams(tolerance=0.1))
+    read_ahead.read_and_prepare_ahead(corpus("nist_ctc02_ap242.stp"), "step", MeshParams(tolerance=0.1))
     assert len(calls) == 1 and calls[0][0] < 0.2 and calls[0][1] is False  # at once, the child still reading
     calls.clear()
-    read_ahead.read_and_mesh_ahead(corpus("cq_cube_cylinder_colors.step"), "step", MeshParams(tolerance=0.1))
+    read_ahead.read_and_prepare_ahead(corpus("cq_cube_cylinder_colors.step"), "step", MeshParams(tolerance=0.1))
     assert calls == []  # read and meshed well within WARM_AFTER

@@ -12,18 +12,20 @@ import jsonschema
 import numpy as np
 import pytest
 
-from amprep.geometry.analysis import face_chordal_errors
-from amprep.geometry.cad import model_from_shape
-from amprep.geometry.checks import check_mesh, manifold3d_accepts
-from amprep.geometry.errors import AmprepError
-from amprep.geometry.io_stl import read_stl
-from amprep.geometry.mesh import Mesh
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.refine import RefineParams, refine_file
-from amprep.geometry.sma import Ratios, edge_table, sma_refine
-from amprep.geometry.surfaces import Surface, surface_of
-from amprep.geometry.tessellate import MeshParams
-from amprep.geometry.vta import vta_refine
+from amprep.errors import AmprepError
+from amprep.geometry.cad.read import model_from_shape
+from amprep.geometry.cad.surfaces import Surface, surface_of
+from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.core.edges import face_edge_table
+from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.io.stl import read_stl
+from amprep.geometry.measure.analysis import face_chordal_errors
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+from amprep.geometry.refine.compare import RefineParams
+from amprep.geometry.refine.sma import Ratios, sma_refine
+from amprep.geometry.refine.vta import vta_refine
+from amprep.jobs.refine import refine_file
 from tests.conftest import corpus
 
 
@@ -78,7 +80,7 @@ def test_sma_on_a_face_with_holes_and_a_seam():
     mesh, surfaces = _coarse(_cross_drilled_cylinder())
     side = [i for i, s in surfaces.items() if s.surface_type == "cylinder" and s.data["radius"] == pytest.approx(10)]
     assert len(side) == 1
-    _, inner = edge_table(mesh)
+    _, inner = face_edge_table(mesh)
     r = sma_refine(mesh, side, surfaces)
     after = check_mesh(r.mesh)
     assert check_mesh(mesh).closed and after.closed and after.degenerate_triangles == 0
@@ -201,8 +203,8 @@ def test_refine_cli_summary_on_an_ascii_terminal(tmp_path):
 def test_a_refinement_over_the_triangle_limit_is_refused_before_it_runs(tmp_path, reference_solids):
     from OCP.BRepTools import BRepTools
 
-    from amprep.geometry.refine import predicted_size
-    from amprep.geometry.sma import sma_output_size
+    from amprep.geometry.refine.compare import predicted_size
+    from amprep.geometry.refine.sma import sma_output_size
 
     mesh, surfaces = _coarse(reference_solids["torus"])
     assert sma_output_size(mesh, [0]) == sma_refine(mesh, [0], surfaces).mesh.n_triangles
@@ -226,8 +228,8 @@ def test_adaptive_splits_edges_to_a_pole_along_them(reference_solids, name, occt
     pole corner's arbitrary u), and each pole corner sits between its triangle's two others: no triangle joins the
     pole to two points of one ruling (a flat triangle once made on the cone), and no round folds the (u,v) near it.
     Longest-edge splitting (by_sagitta off) splits edges to the pole all the time."""
-    from amprep.geometry.adaptive import adaptive_refine, pole_vertices
-    from amprep.geometry.edge_curves import EdgeCurves
+    from amprep.geometry.cad.edge_curves import EdgeCurves
+    from amprep.geometry.refine.adaptive import adaptive_refine, pole_vertices
 
     model = model_from_shape(reference_solids[name])
     mesh = mesh_model(model, MeshParams(tolerance=0.2, occt_edges=occt_edges)).mesh
@@ -246,9 +248,9 @@ def test_adaptive_splits_edges_to_a_pole_along_them(reference_solids, name, occt
 
 @pytest.mark.parametrize("name", ["cylinder", "sphere", "torus", "cone", "bspline_loft", "plate_with_holes"])
 def test_adaptive_reaches_the_target_on_every_triangle_with_fewer_triangles_than_sma(reference_solids, name):
-    from amprep.geometry.adaptive import adaptive_refine
-    from amprep.geometry.edge_curves import EdgeCurves
-    from amprep.geometry.mesh import ON_BREP_EDGE
+    from amprep.geometry.cad.edge_curves import EdgeCurves
+    from amprep.geometry.core.mesh import ON_BREP_EDGE
+    from amprep.geometry.refine.adaptive import adaptive_refine
 
     model = model_from_shape(reference_solids[name])
     mesh = mesh_model(model, MeshParams(tolerance=0.2)).mesh
@@ -281,7 +283,7 @@ def test_adaptive_without_b_rep_edges_leaves_contour_edges_whole(reference_solid
     are untouched, and triangles whose error is their contour edge's own sagitta are left alone."""
     from dataclasses import replace
 
-    from amprep.geometry.adaptive import adaptive_refine
+    from amprep.geometry.refine.adaptive import adaptive_refine
 
     mesh, surfaces = _coarse(reference_solids["sphere"])
     no_topology = replace(mesh, vertex_dim=None, vertex_entity=None, vertex_param=None)
@@ -316,10 +318,10 @@ def test_adaptive_on_real_edges_that_wrap_a_periodic_face_and_stray_from_their_p
     period, its two B-rep vertices 1e-5 mm apart) and face 35's edge strays 0.006 mm from its pcurve: every contour
     split must land on the right period and the right end, so the error falls under the target on every triangle,
     the part stays closed and no B-rep edge point is made twice."""
-    from amprep.geometry.adaptive import adaptive_refine
-    from amprep.geometry.cad import read_cad
-    from amprep.geometry.edge_curves import EdgeCurves
-    from amprep.geometry.mesh import ON_BREP_EDGE
+    from amprep.geometry.cad.edge_curves import EdgeCurves
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.core.mesh import ON_BREP_EDGE
+    from amprep.geometry.refine.adaptive import adaptive_refine
 
     model = read_cad(corpus("nist_ctc02_ap242.stp"))
     mesh = mesh_model(model, MeshParams(tolerance=0.2)).mesh

@@ -5,8 +5,8 @@ import pytest
 from OCP.BRepAdaptor import BRepAdaptor_Surface
 from OCP.BRepTools import BRepTools
 
-from amprep.geometry.cad import read_cad
-from amprep.geometry.surfaces import surface_of
+from amprep.geometry.cad.read import read_cad
+from amprep.geometry.cad.surfaces import surface_of
 from tests.conftest import corpus
 
 
@@ -39,7 +39,7 @@ def test_closed_forms_cover_the_analytic_types():
 
 def test_numpy_and_compiled_bspline_paths_agree():
     """Small calls run numpy, large ones the numba kernel: both give the same points."""
-    from amprep.geometry import bspline
+    from amprep.geometry.cad import bspline
 
     model = read_cad(corpus("nist_ctc02_bspline_ap203.stp"))
     rng = np.random.default_rng(3)
@@ -50,12 +50,12 @@ def test_numpy_and_compiled_bspline_paths_agree():
         d = s.data
         u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
         uv = rng.random((500, 2)) * [u1 - u0, v1 - v0] + [u0, v0]
-        from amprep.geometry.surfaces import wrap_periodic
+        from amprep.geometry.cad.surfaces import wrap_periodic
 
         uv = wrap_periodic(uv, d["uperiod"], d["vperiod"])
         pw = np.concatenate([d["poles"] * d["weights"][..., None], d["weights"][..., None]], axis=2)
         ref = bspline._eval_surface_numpy(pw, d["uknots"], d["vknots"], d["udeg"], d["vdeg"], uv)
-        from amprep.geometry._bspline_kernel import eval_surface_kernel
+        from amprep.geometry.cad._bspline_kernel import eval_surface_kernel
 
         out = np.empty_like(ref)
         eval_surface_kernel(np.ascontiguousarray(pw), d["uknots"], d["vknots"], d["udeg"], d["vdeg"], uv, out)
@@ -81,10 +81,10 @@ def test_surfaces_of_revolution_and_extrusion_are_evaluated_in_numpy_and_match_o
     """Swept surfaces (a revolved or extruded spline, a revolved arc; located copies too): closed-form evaluation
     from the basis curve, no OCCT point loop, equal to OCCT's evaluator to 1e-9; and a conversion of the solid is
     closed and within tolerance."""
-    from amprep.geometry.cad import model_from_shape
-    from amprep.geometry.checks import check_mesh
-    from amprep.geometry.mesher import mesh_model
-    from amprep.geometry.tessellate import MeshParams
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.core.checks import check_mesh
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
 
     model = model_from_shape(_swept_solids()[name].wrapped)
     rng = np.random.default_rng(3)

@@ -6,13 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from amprep.geometry.analysis import AnalysisParams, analyze_file
-from amprep.geometry.cad import model_from_shape
-from amprep.geometry.errors import AmprepError
-from amprep.geometry.io_stl import write_stl
-from amprep.geometry.mesh import Mesh
-from amprep.geometry.mesher import mesh_model
-from amprep.geometry.tessellate import MeshParams
+from amprep.errors import AmprepError
+from amprep.geometry.cad.read import model_from_shape
+from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.io.stl import write_stl
+from amprep.geometry.measure.analysis import AnalysisParams
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+from amprep.jobs.analyze import analyze_file
 from tests.conftest import corpus
 
 FAST = AnalysisParams(bounding_box=False)

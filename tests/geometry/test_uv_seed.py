@@ -3,12 +3,15 @@
 import numpy as np
 import pytest
 
-from amprep.geometry import fallback, uv_seed
-from amprep.geometry.brepmesh import run_brepmesh
-from amprep.geometry.cad import read_cad
-from amprep.geometry.surfaces import Surface, cylinder, surface_of, torus
-from amprep.geometry.tessellate import MeshParams, Topology, extract_patch
-from amprep.geometry.uv_cdt import metric_scale
+from amprep.geometry.cad.read import read_cad
+from amprep.geometry.cad.surfaces import Surface, cylinder, surface_of, torus
+from amprep.geometry.cad.topology import Topology
+from amprep.geometry.meshing import face_mesher as fallback
+from amprep.geometry.meshing import uv_seed
+from amprep.geometry.meshing.brepmesh import run_brepmesh
+from amprep.geometry.meshing.occt_read import extract_patch
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.uv_cdt import metric_scale
 from tests.conftest import corpus
 
 ORIGIN, X, Y, Z = np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
@@ -86,10 +89,10 @@ def test_refining_in_the_space_the_mesh_was_made_in_converges(ctc02_face35):
     """A curvature-seeded mesh is Delaunay in its stretched (u,v), not in the metric one: re-triangulating regions
     in the metric space flips the neighbours' diagonals and the bad triangles moved along the face for 40 rounds;
     in its own space insertions finish it with a third of the triangles."""
-    from amprep.geometry.chordal import triangle_chordal_error
-    from amprep.geometry.patch_refine import refine_patch
-    from amprep.geometry.tessellate import FacePatch
-    from amprep.geometry.uv_cdt import triangulate_pslg
+    from amprep.geometry.measure.chordal import triangle_chordal_error
+    from amprep.geometry.meshing.local_refine import refine_patch
+    from amprep.geometry.meshing.occt_read import FacePatch
+    from amprep.geometry.meshing.uv_cdt import triangulate_pslg
 
     face, topo, surface = ctc02_face35
     tol = 0.0098

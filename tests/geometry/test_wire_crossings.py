@@ -16,8 +16,8 @@ from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopoDS import TopoDS
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
-from amprep.geometry.cad import read_shape
-from amprep.geometry.wire_crossings import crossing_faces, overlapping_boxes, wire_crosses, wires_cross
+from amprep.geometry.cad.read import read_shape
+from amprep.geometry.cad.wire_crossings import crossing_faces, overlapping_boxes, wire_crosses, wires_cross
 from tests.conftest import corpus
 
 

@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from amprep.geometry.checks import check_mesh
-from amprep.geometry.io_stl import read_stl
+from amprep.geometry.core.checks import check_mesh
+from amprep.geometry.io.stl import read_stl
 from tests.conftest import corpus
 from tests.service.conftest import submit, wait_status
 

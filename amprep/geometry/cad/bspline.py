@@ -1,0 +1,117 @@
+"""Vectorised (rational) B-spline evaluation from poles, weights and flat knot vectors."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+
+def find_span(knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
+    """(N,) int: the span i with knots[i] ≤ t < knots[i+1], clamped to [degree, n_poles − 1]."""
+    n_poles = len(knots) - degree - 1
+    span = np.searchsorted(knots, t, side="right") - 1
+    return np.clip(span, degree, n_poles - 1)
+
+
+def basis_functions(knots: np.ndarray, degree: int, t: np.ndarray, span: np.ndarray) -> np.ndarray:
+    """(N, degree+1) non-zero basis values N_{span−p+a, p}(t) by the Cox–de Boor triangle (Piegl–Tiller A2.2)."""
+    n = len(t)
+    basis = np.zeros((n, degree + 1))
+    basis[:, 0] = 1.0
+    left = np.zeros((n, degree + 1))
+    right = np.zeros((n, degree + 1))
+    for j in range(1, degree + 1):
+        left[:, j] = t - knots[span + 1 - j]
+        right[:, j] = knots[span + j] - t
+        saved = np.zeros(n)
+        for r in range(j):
+            denom = right[:, r + 1] + left[:, j - r]
+            temp = np.divide(basis[:, r], denom, out=np.zeros(n), where=denom != 0)
+            basis[:, r] = saved + right[:, r + 1] * temp
+            saved = left[:, j - r] * temp
+        basis[:, j] = saved
+    return basis
+
+
+COMPILED_MIN_POINTS = 100_000
+#: numpy evaluation a process may do (points; B-spline points count 3× closed-form ones, being ~5× slower) before
+#: loading numba (0.5 s once) pays: many small calls add up once refinement drives them
+NUMPY_BUDGET = 1_500_000
+_kernel = None  # (parallel kernel, serial kernel, points per parallel block) once loaded
+_numpy_work = 0
+_CHUNK = 65536
+
+
+def spend_numpy(points: int) -> bool:
+    """Count `points` of numpy evaluation in this process; False once the total passes NUMPY_BUDGET (time to load
+    the compiled kernels)."""
+    global _numpy_work
+    _numpy_work += points
+    return _numpy_work < NUMPY_BUDGET
+
+
+def _eval_surface_numpy(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, udeg: int, vdeg: int,
+                        uv: np.ndarray) -> np.ndarray:
+    """(N, 3) the same sum in numpy: spans by searchsorted, basis by basis_functions, one batched matmul."""
+    out = np.empty((len(uv), 3))
+    a = np.arange(udeg + 1)[None, :, None]
+    b = np.arange(vdeg + 1)[None, None, :]
+    for s in range(0, len(uv), _CHUNK):
+        u, v = uv[s:s + _CHUNK, 0], uv[s:s + _CHUNK, 1]
+        su, sv = find_span(uknots, udeg, u), find_span(vknots, vdeg, v)
+        nu, nv = basis_functions(uknots, udeg, u, su), basis_functions(vknots, vdeg, v, sv)
+        flat = ((su - udeg)[:, None, None] + a) * pw.shape[1] + ((sv - vdeg)[:, None, None] + b)
+        block = pw.reshape(-1, 4)[flat.reshape(len(u), -1)]  # (n, (p+1)(q+1), 4)
+        basis = (nu[:, :, None] * nv[:, None, :]).reshape(len(u), 1, -1)  # (n, 1, (p+1)(q+1))
+        h = np.matmul(basis, block)[:, 0]  # (n, 4)
+        out[s:s + _CHUNK] = h[:, :3] / h[:, 3:4]
+    return out
+
+
+def fork_safe_threads() -> None:
+    """Have numba start its threads with its workqueue layer unless the user chose one: GNU OpenMP's threads abort
+    a forked child (face_pool forks workers)."""
+    if "NUMBA_THREADING_LAYER" not in os.environ:
+        from numba import config
+
+        config.THREADING_LAYER = "workqueue"
+
+
+def load_kernel() -> None:
+    """Import numba and the compiled B-spline kernel (~0.7 s once per process; cached machine code after)."""
+    global _kernel
+    fork_safe_threads()
+    from amprep.geometry.cad._bspline_kernel import EVAL_BLOCK, eval_surface_kernel, eval_surface_serial
+
+    _kernel = (eval_surface_kernel, eval_surface_serial, EVAL_BLOCK)
+
+
+def kernel_loaded() -> bool:
+    """True once numba and the compiled kernels are loaded in this process (later calls of any size use them)."""
+    return _kernel is not None
+
+
+def eval_surface(
+    poles: np.ndarray, weights: np.ndarray, uknots: np.ndarray, vknots: np.ndarray,
+    udeg: int, vdeg: int, uv: np.ndarray,
+) -> np.ndarray:
+    """(N, 3) S(u,v) = Σ N_i(u) N_j(v) w_ij P_ij / Σ N_i(u) N_j(v) w_ij; poles (nu, nv, 3), weights (nu, nv).
+
+    Calls of ≥ COMPILED_MIN_POINTS points, every call once the process's numpy work passes NUMPY_BUDGET, and every
+    call once the kernel is loaded run the numba kernel of _bspline_kernel.py; the others run numpy, so a small part
+    never pays numba's ~0.7 s start-up."""
+    global _kernel
+    pw = np.ascontiguousarray(np.concatenate([poles * weights[..., None], weights[..., None]], axis=2))
+    if _kernel is None and len(uv) < COMPILED_MIN_POINTS and spend_numpy(3 * len(uv)):
+        return _eval_surface_numpy(pw, uknots, vknots, udeg, vdeg, np.asarray(uv, dtype=np.float64))
+    if _kernel is None:
+        load_kernel()
+    assert _kernel is not None
+    out = np.empty((len(uv), 3))
+    parallel, serial, block = _kernel
+    run = serial if len(uv) <= block else parallel
+    run(pw, np.ascontiguousarray(uknots, dtype=np.float64), np.ascontiguousarray(vknots, dtype=np.float64),
+        int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
+    return out
+

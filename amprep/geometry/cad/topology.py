@@ -1,0 +1,108 @@
+"""The B-rep topology the meshers weld through: indexed edges and vertices, each edge's discretisation, explorers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from OCP.BRep import BRep_Builder, BRep_Tool
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_VERTEX
+from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopLoc import TopLoc_Location
+from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
+from OCP.TopTools import TopTools_IndexedMapOfShape
+
+
+def trsf_matrix(loc: TopLoc_Location) -> np.ndarray | None:
+    """(3, 4) affine matrix of a location, or None for the identity."""
+    if loc.IsIdentity():
+        return None
+    t = loc.Transformation()
+    return np.array([[t.Value(r, c) for c in range(1, 5)] for r in range(1, 4)])
+
+
+def apply_trsf(m: np.ndarray | None, pts: np.ndarray) -> np.ndarray:
+    """(N, 3) points moved by a (3, 4) affine matrix (None: unchanged)."""
+    return pts if m is None else pts @ m[:, :3].T + m[:, 3]
+
+
+@dataclass
+class Topology:
+    """Indexed B-rep edges and vertices of a shape, and each edge's discretisation (sorted parameters)."""
+
+    edges: TopTools_IndexedMapOfShape
+    vertices: TopTools_IndexedMapOfShape
+    edge_params: dict[int, np.ndarray] = field(default_factory=dict)
+    parent: dict[int, int] = field(default_factory=dict)  # union-find over B-rep vertices of collapsed edges
+    _facts: dict[int, tuple[int, int, float, int, float, bool]] = field(default_factory=dict, repr=False)
+
+    def merge_vertices(self, a: int, b: int) -> None:
+        """Record that the mesher collapsed an edge: its two end vertices become one mesh vertex."""
+        ra, rb = self.root(a), self.root(b)
+        if ra != rb:
+            self.parent[max(ra, rb)] = min(ra, rb)
+
+    def root(self, v: int) -> int:
+        while v in self.parent:
+            v = self.parent[v]
+        return v
+
+    def vertex_roots(self) -> np.ndarray:
+        """(n_vertices,) the representative of each B-rep vertex after edge collapses."""
+        roots = np.arange(self.vertices.Extent())
+        for v in list(self.parent):
+            roots[v] = self.root(v)
+        return roots
+
+    @classmethod
+    def of(cls, shape: TopoDS_Shape) -> Topology:
+        e, v = TopTools_IndexedMapOfShape(), TopTools_IndexedMapOfShape()
+        TopExp.MapShapes_s(shape, TopAbs_EDGE, e)
+        TopExp.MapShapes_s(shape, TopAbs_VERTEX, v)
+        return cls(e, v)
+
+    def edge_index(self, edge: TopoDS_Edge) -> int:
+        return self.edges.FindIndex(edge) - 1
+
+    def vertex_index(self, vertex) -> int:  # type: ignore[no-untyped-def]
+        return self.vertices.FindIndex(vertex) - 1
+
+    def edge_ends(self, edge: TopoDS_Edge) -> tuple[int, float, int, float]:
+        """(first vertex, its parameter, last vertex, its parameter) of an edge, orientation ignored."""
+        return self.edge_facts(edge)[1:5]  # type: ignore[return-value]
+
+    def edge_facts(self, edge: TopoDS_Edge) -> tuple[int, int, float, int, float, bool]:
+        """(edge index, edge_ends..., degenerated) of an edge, asked of OCCT once per edge (a cache on the topology)."""
+        ei = self.edge_index(edge)
+        known = self._facts.get(ei)
+        if known is None:
+            e = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
+            v1, v2 = TopExp.FirstVertex_s(e), TopExp.LastVertex_s(e)
+            known = self._facts[ei] = (ei, self.vertex_index(v1), BRep_Tool.Parameter_s(v1, e), self.vertex_index(v2),
+                                       BRep_Tool.Parameter_s(v2, e), bool(BRep_Tool.Degenerated_s(e)))
+        return known
+
+
+def explore(shape: TopoDS_Shape, kind, cast, avoid=None) -> list:  # type: ignore[no-untyped-def,type-arg]
+    """The sub-shapes of one kind in TopExp order, oriented as they sit in `shape`, cast by `cast` (`avoid`: a
+    kind whose sub-shapes are not entered, e.g. the shells outside solids)."""
+    out = []
+    exp = TopExp_Explorer(shape, kind) if avoid is None else TopExp_Explorer(shape, kind, avoid)
+    while exp.More():
+        out.append(cast(exp.Current()))
+        exp.Next()
+    return out
+
+
+def compound(shapes: list) -> TopoDS_Compound:  # type: ignore[type-arg]
+    """A compound holding the given shapes (sharing their sub-shapes, not copies)."""
+    builder, comp = BRep_Builder(), TopoDS_Compound()
+    builder.MakeCompound(comp)
+    for s in shapes:
+        builder.Add(comp, s)
+    return comp
+
+
+def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
+    """The oriented edges of a face (a seam edge comes twice, once per orientation)."""
+    return explore(face, TopAbs_EDGE, TopoDS.Edge_s)

@@ -1,0 +1,145 @@
+"""Mesh validity from edge incidence: boundary, non-manifold and misoriented edges, degenerates, shells."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from amprep.geometry.core.edges import EdgeIncidence, edge_incidence
+from amprep.geometry.core.mesh import Mesh
+
+
+def triangle_areas(corners: np.ndarray) -> np.ndarray:
+    """(m,) area = |(b − a) × (c − a)| / 2 of (m, 3, 3) corners."""
+    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+
+
+def signed_volume(corners: np.ndarray) -> float:
+    """V = Σ a · (b × c) / 6 over (m, 3, 3) corners (positive for a closed, outward-oriented mesh)."""
+    return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
+
+
+@dataclass(frozen=True)
+class MeshChecks:
+    """Counts from our own edge checks; `closed` = no boundary, non-manifold or misoriented edge."""
+
+    triangles: int
+    vertices: int
+    boundary_edges: int
+    nonmanifold_edges: int
+    misoriented_edges: int
+    degenerate_triangles: int
+    duplicate_triangles: int
+    shells: int
+    volume: float
+    area: float
+
+    @property
+    def closed(self) -> bool:
+        return self.boundary_edges == 0 and self.nonmanifold_edges == 0 and self.misoriented_edges == 0
+
+
+#: a triangle of area ≤ this × (bounding-box diagonal)² is degenerate (its height is near float32 resolution)
+DEGENERATE_REL_AREA = 1e-12
+
+
+def degenerate_mask(mesh: Mesh, rel_eps: float = DEGENERATE_REL_AREA, areas: np.ndarray | None = None) -> np.ndarray:
+    """(m,) bool: a repeated corner index, or area ≤ rel_eps · (bbox diagonal)² (`areas` (m,): the mesh's
+    triangle_areas when already computed)."""
+    t = mesh.triangles
+    repeated = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
+    lo, hi = mesh.bbox()
+    scale = float(np.linalg.norm(hi - lo)) or 1.0
+    areas = triangle_areas(mesh.corners) if areas is None else areas
+    return repeated | (areas <= rel_eps * scale * scale)
+
+
+def float32_degenerate_count(mesh: Mesh, degenerate: np.ndarray | None = None) -> int:
+    """Triangles that are not degenerate but become so once their corners are rounded to float32 (what STL and
+    3MF store): the triangle count a reader of the file will call degenerate beyond the in-memory check
+    (`degenerate` (m,): the mesh's degenerate_mask when already computed)."""
+    if mesh.n_triangles == 0:
+        return 0
+    rounded = mesh.with_arrays(vertices=mesh.vertices.astype(np.float32).astype(np.float64))
+    degenerate = degenerate_mask(mesh) if degenerate is None else degenerate
+    return int((degenerate_mask(rounded) & ~degenerate).sum())
+
+
+def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.ndarray]:
+    """(number of shells, (m,) label per triangle): triangles joined through shared edges (`inc`: the mesh's edge
+    table when already made)."""
+    m = mesh.n_triangles
+    if m == 0:
+        return 0, np.zeros(0, np.int64)
+    inc = inc if inc is not None else edge_incidence(mesh.triangles)
+    tri = np.repeat(np.arange(m), 3)
+    edge = inc.edge_of.reshape(-1)
+    graph = coo_matrix((np.ones(len(tri)), (tri, edge + m)), shape=(m + len(inc.edges),) * 2)
+    n, labels = connected_components(graph, directed=False)
+    labels = labels[:m]
+    present = np.zeros(n, bool)
+    present[labels] = True
+    labels = (np.cumsum(present) - 1)[labels]  # components renumbered 0.. in order, as np.unique would
+    return int(labels.max()) + 1, labels
+
+
+def duplicate_count(triangles: np.ndarray) -> int:
+    """Triangles whose vertex set repeats an earlier triangle's: (m, 3) sorted per row, rows sorted (as one int64
+    key when the indices allow), equal neighbours counted."""
+    if len(triangles) < 2:
+        return 0
+    srt = np.sort(triangles, axis=1).astype(np.int64)
+    n = int(srt.max()) + 1
+    if n**3 < 2**62:
+        key = np.sort((srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2])
+        return int((key[1:] == key[:-1]).sum())
+    srt = srt[np.lexsort((srt[:, 2], srt[:, 1], srt[:, 0]))]
+    return int((srt[1:] == srt[:-1]).all(axis=1).sum())
+
+
+def check_mesh(mesh: Mesh, degenerate: np.ndarray | None = None) -> MeshChecks:
+    """Edge-incidence checks of a mesh (an edge is identified by its two vertex indices, never by distance);
+    `degenerate` (m,) bool, when given, receives the degenerate_mask."""
+    if mesh.n_triangles == 0:
+        return MeshChecks(0, mesh.n_vertices, 0, 0, 0, 0, 0, 0, 0.0, 0.0)
+    inc = edge_incidence(mesh.triangles)
+    boundary = int((inc.count == 1).sum())
+    nonmanifold = int((inc.count > 2).sum())
+    misoriented = int(((inc.count == 2) & (inc.forward != 1)).sum())
+    corners = mesh.corners
+    areas = triangle_areas(corners)
+    mask = degenerate_mask(mesh, areas=areas)
+    if degenerate is not None:
+        degenerate[:] = mask
+    shells, _ = shell_labels(mesh, inc)
+    used = np.zeros(max(mesh.n_vertices, int(mesh.triangles.max()) + 1), bool)
+    used[mesh.triangles] = True
+    return MeshChecks(
+        triangles=mesh.n_triangles,
+        vertices=int(used.sum()),
+        boundary_edges=boundary,
+        nonmanifold_edges=nonmanifold,
+        misoriented_edges=misoriented,
+        degenerate_triangles=int(mask.sum()),
+        duplicate_triangles=duplicate_count(mesh.triangles),
+        shells=shells,
+        volume=signed_volume(corners),
+        area=float(areas.sum()),
+    )
+
+
+def manifold3d_accepts(mesh: Mesh) -> bool:
+    """True when manifold3d builds a valid Manifold from the mesh (its own 2-manifold, oriented check)."""
+    import manifold3d
+
+    if mesh.n_triangles == 0:
+        return False
+    m = manifold3d.Mesh(
+        vert_properties=np.ascontiguousarray(mesh.vertices, dtype=np.float32),
+        tri_verts=np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
+    )
+    man = manifold3d.Manifold(m)
+    return man.status() == manifold3d.Error.NoError

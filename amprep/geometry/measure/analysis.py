@@ -1,0 +1,198 @@
+"""Score a mesh: every number of the error report (checks, defects, regularity, cusp height, per-face chordal error
+and cylindricity against the exact surfaces when the faces are known)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.core.edges import edge_incidence
+from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.measure import cusp
+from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error
+from amprep.geometry.measure.cylindricity import minimum_zone
+from amprep.geometry.measure.defects import boundary_loops, defect_locations, nonmanifold_vertices, self_intersections
+from amprep.geometry.measure.mesh_report import SCHEMA, mesh_issues, mesh_section
+from amprep.geometry.measure.regularity import MEASURES, regularity, summarize
+
+
+@dataclass(frozen=True)
+class AnalysisParams:
+    """layer t (mm), build direction b, chordal sampling order k, cloud density (points/mm², None: (4/t)²),
+    the number of defect locations and self-intersection examples kept, and whether to run the box method."""
+
+    layer: float = 0.2
+    build_dir: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    sample_order: int = 6
+    cloud_density: float | None = None
+    location_cap: int = 1000
+    intersection_examples: int = 100
+    bounding_box: bool = True
+
+    def validate(self) -> None:
+        if not self.layer > 0:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "layer must be > 0")
+        if not np.linalg.norm(self.build_dir) > 0:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "build_dir must not be the zero vector")
+        if not 1 <= self.sample_order <= 30:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "sample_order must be in 1..30")
+
+
+@dataclass(frozen=True, eq=False)
+class Analysis:
+    """The report (JSON-ready) and the per-triangle fields the viewer draws: chordal error (m,) (nan: unknown) and
+    approximate cusp height (m,), on `mesh`; `box` the bounding-box method's boxes."""
+
+    report: dict[str, Any]
+    mesh: Mesh
+    chordal: np.ndarray
+    cusp_height: np.ndarray
+    box: cusp.BoxCusp | None
+    face_chordal: dict[int, np.ndarray] = field(default_factory=dict)
+
+
+def stats(x: np.ndarray) -> dict[str, float] | None:
+    """{mean, max} of the finite values of x, None when there are none."""
+    x = x[np.isfinite(x)]
+    return {"mean": float(x.mean()), "max": float(x.max())} if len(x) else None
+
+
+def face_chordal_errors(mesh: Mesh, surfaces: dict[int, Surface], order: int) -> np.ndarray:
+    """(m,) chordal error ε_T = max_p |(S(u_p, v_p) − a)·n̂| of every triangle with a face, a surface and (u,v);
+    nan elsewhere."""
+    out = np.full(mesh.n_triangles, np.nan)
+    if mesh.uv is None or not surfaces:
+        return out
+    corners = mesh.corners
+    by_face = np.argsort(mesh.face_ids, kind="stable")
+    bounds = np.searchsorted(mesh.face_ids[by_face], np.arange(max(surfaces) + 2))
+    for fid, surf in surfaces.items():
+        tris = by_face[bounds[fid]:bounds[fid + 1]]
+        if len(tris) == 0:
+            continue
+        info = mesh.faces[fid] if fid < len(mesh.faces) else None
+        if info is not None and info.meshed_by == "stored":
+            continue
+        out[tris] = triangle_chordal_error(corners[tris], mesh.uv[tris], surf, order, affine=surf.affine)
+    return out
+
+
+def _cylinder_cloud(corners: np.ndarray) -> np.ndarray:
+    """Points on the triangles (order-4 barycentric grid: corners, edge points, interior), unique."""
+    w = barycentric_grid(4)
+    pts = np.einsum("pk,mkd->mpd", w, corners).reshape(-1, 3)
+    return np.unique(pts.round(9), axis=0)
+
+
+def faces_section(mesh: Mesh, chordal: np.ndarray, surfaces: dict[int, Surface], params: AnalysisParams,
+                  quality: dict[str, np.ndarray], n_faces: int) -> list[dict[str, Any]]:
+    """faces[]: per CAD face id, surface type, triangles, chordal error {mean, max}, profile error = 2·max|d|,
+    approximate cusp height {mean, max}, cylindricity (cylinders), regularity means."""
+    b = np.asarray(params.build_dir, float)
+    corners = mesh.corners
+    c_tri, counted = cusp.approximate(corners, params.layer, b)
+    _, area = cusp.unit_normals(corners)
+    order = np.argsort(mesh.face_ids, kind="stable")
+    bounds = np.searchsorted(mesh.face_ids[order], np.arange(n_faces + 1))
+    out = []
+    for fid in range(n_faces):
+        tris = order[bounds[fid]:bounds[fid + 1]]
+        stype = mesh.faces[fid].surface_type if fid < len(mesh.faces) else "none"
+        entry: dict[str, Any] = {"id": fid, "surface_type": stype, "triangles": int(len(tris))}
+        ch = stats(chordal[tris]) if len(tris) else None
+        entry["chordal_error"] = ch
+        entry["profile_error"] = 2 * ch["max"] if ch else None
+        w = (area[tris] * counted[tris])
+        entry["cusp_height"] = ({"mean": float((c_tri[tris] * w).sum() / w.sum()), "max": float(c_tri[tris][counted[tris]].max())}
+                                if len(tris) and w.sum() > 0 else {"mean": 0.0, "max": 0.0} if len(tris) else None)
+        entry["cylindricity"] = None
+        surf = surfaces.get(fid)
+        if stype == "cylinder" and len(tris) and surf is not None and surf.data:
+            pts = _cylinder_cloud(corners[tris])
+            if len(pts) >= 6:
+                entry["cylindricity"] = minimum_zone(pts, surf.data["origin"], surf.data["axis"]).as_dict()
+        entry["regularity"] = {k: float(quality[k][tris].mean()) for k in MEASURES} if len(tris) else None
+        out.append(entry)
+    return out
+
+
+def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces: dict[int, Surface] | None = None,
+                 n_faces: int = 0, input_info: dict[str, Any] | None = None, tolerance: float | None = None,
+                 progress: ProgressFn | None = None) -> Analysis:
+    """Score a mesh: checks, defects and their locations, regularity, cusp height (both methods), and, with the
+    faces' exact surfaces, per-face chordal error and cylindricity."""
+    params.validate()
+    prog = Progress(progress)
+    b = np.asarray(params.build_dir, float)
+    b = b / np.linalg.norm(b)
+    prog("checking the mesh", 0.0)
+    checks = check_mesh(mesh)
+    ok3d = manifold3d_accepts(mesh)
+    inc = edge_incidence(mesh.triangles)
+    loops = boundary_loops(mesh, inc)
+    nmv = nonmanifold_vertices(mesh, inc)
+    prog("self-intersections", 0.15)
+    n_si, si_examples = self_intersections(mesh, params.intersection_examples)
+    section = mesh_section(mesh, checks, ok3d)
+    section.update({
+        "boundary_loops": {"count": len(loops), "total_length": float(sum(loops)), "lengths": loops[:100]},
+        "nonmanifold_vertices": int(len(nmv)),
+        "self_intersections": {"count": n_si, "examples": si_examples.tolist()},
+        "locations": defect_locations(mesh, inc, params.location_cap),
+    })
+    prog("regularity", 0.35)
+    q = regularity(mesh.corners)
+    summary = summarize(q)
+    prog("chordal error", 0.4)
+    chordal = face_chordal_errors(mesh, surfaces or {}, params.sample_order)
+    prog("cusp height", 0.6)
+    c_tri, counted = cusp.approximate(mesh.corners, params.layer, b)
+    box = cusp.bounding_box(mesh.corners, params.layer, b, params.cloud_density) if params.bounding_box else None
+    prog("per-face report", 0.85)
+    has_cad = surfaces is not None
+    faces = faces_section(mesh, chordal, surfaces or {}, params, q, n_faces) if has_cad else []
+    types: dict[str, int] = {}
+    if has_cad:
+        for f in faces:
+            types[f["surface_type"]] = types.get(f["surface_type"], 0) + f["triangles"]
+    unmeshed = [f["id"] for f in faces if f["triangles"] == 0]
+    issues = mesh_issues(checks, ok3d, len(unmeshed))
+    if unmeshed:
+        issues[-1 if issues and issues[-1]["code"] == "unmeshed_faces" else 0]["face_ids"] = unmeshed[:1000]
+    if n_si:
+        issues.append({"code": "self_intersections", "severity": "error", "count": n_si,
+                       "message": "pairs of triangles that cross each other"})
+    if len(nmv):
+        issues.append({"code": "nonmanifold_vertices", "severity": "error", "count": int(len(nmv)),
+                       "message": "vertices where separate fans of triangles touch (bow-ties)"})
+    if not has_cad:
+        issues.append({"code": "chordal_error_unavailable", "severity": "info", "count": 1,
+                       "message": "no CAD model: the distance to the design surface cannot be measured"})
+    elif tolerance is not None:
+        over = [f["id"] for f in faces if f["chordal_error"] and f["chordal_error"]["max"] > tolerance * (1 + 1e-9)]
+        if over:
+            issues.append({"code": "chordal_error_over_tolerance", "severity": "warning", "count": len(over),
+                           "message": f"faces whose chordal error exceeds {tolerance:g} mm", "face_ids": over[:1000]})
+    report: dict[str, Any] = {
+        "schema": SCHEMA,
+        "input": input_info or {},
+        "mesh": section,
+        "faces": faces,
+        "chordal_error": stats(chordal) if has_cad else None,
+        "regularity": summary.as_dict(),
+        "surface_types": types,
+        "cusp_height": {"layer": params.layer, "build_direction": [float(x) for x in b],
+                        "approximate": cusp.approximate_summary(mesh.corners, params.layer, b),
+                        "bounding_box": box.summary() if box is not None else None},
+        "issues": issues,
+        "params": {"layer": params.layer, "build_dir": list(params.build_dir), "sample_order": params.sample_order,
+                   "cloud_density": box.density if box is not None else params.cloud_density},
+    }
+    prog("done", 1.0)
+    return Analysis(report, mesh, chordal, np.where(counted, c_tri, 0.0), box)

@@ -1,0 +1,179 @@
+"""Chordal error: distance from the exact surface to each triangle's plane, sampled in the face's (u,v)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import lru_cache
+
+import numpy as np
+
+from amprep.geometry.cad import bspline as _bspline
+from amprep.geometry.cad.surfaces import Surface
+
+_CHUNK_POINTS = 1_000_000
+_kernels = None  # the _chordal_kernel module once loaded
+#: numba's start-up (~0.6 s per process) pays for itself from about 100k triangles at order 6 (the kernels run
+#: ~3× numpy's speed on 2 cores); a call this large loads them, and so does load_kernels() for a large job
+COMPILED_MIN_POINTS = 3_000_000
+
+
+def load_kernels() -> None:
+    """Load the compiled kernels now (mesh_model does when the whole part is large): every later call uses them."""
+    global _kernels
+    if _kernels is None:
+        _bspline.fork_safe_threads()
+        from amprep.geometry.measure import _chordal_kernel
+
+        _kernels = _chordal_kernel
+        _bspline.load_kernel()
+
+
+def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
+    """load_kernels(), then calls of each kernel (serial and parallel) on a cylinder and a B-spline face with the types
+    of real calls: numba's first dispatch (its typing registry, ~0.3 s) is paid here, e.g. while another process
+    reads the file. numba is imported first (~0.3 s); when `stop()` is then True (the file is read already: a small
+    part, whose numpy measures cost less than the ~0.5 s left) nothing is loaded and the kernels stay unused."""
+    _bspline.fork_safe_threads()  # imports numba
+    if stop is not None and stop():
+        return
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.GeomAPI import GeomAPI_PointsToBSplineSurface
+    from OCP.gp import gp_Pnt
+    from OCP.TColgp import TColgp_Array2OfPnt
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from amprep.geometry.cad.surfaces import surface_of
+
+    load_kernels()
+    from amprep.geometry.cad._bspline_kernel import EVAL_BLOCK
+
+    grid = TColgp_Array2OfPnt(1, 4, 1, 4)
+    for i in range(1, 5):
+        for j in range(1, 5):
+            grid.SetValue(i, j, gp_Pnt(i, j, 0.1 * i * j))
+    patch = BRepBuilderAPI_MakeFace(GeomAPI_PointsToBSplineSurface(grid).Surface(), 1e-6).Face()
+    cylinder = TopoDS.Face_s(TopExp_Explorer(BRepPrimAPI_MakeCylinder(1.0, 1.0).Shape(), TopAbs_FACE).Current())
+    uv = np.array([[[0.1, 0.1], [0.5, 0.1], [0.1, 0.5]]])
+    for face in (cylinder, patch):
+        surface = surface_of(face)
+        corners = surface.evaluate(uv[0])[None]
+        for tris, points in ((1, 1), (_kernels.BLOCK + 1, EVAL_BLOCK + 1)):  # serial, then parallel kernels
+            surface.evaluate(np.repeat(uv[0], points, axis=0))
+            triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
+
+
+def kernels_loaded() -> bool:
+    """True once every chordal measure in this process runs the compiled kernels."""
+    return _kernels is not None
+
+
+@lru_cache(maxsize=32)
+def barycentric_grid(order: int) -> np.ndarray:
+    """((k+1)(k+2)/2, 3) barycentric weights (i, j, k−i−j)/k of the order-k grid on a triangle (k=6: 28)."""
+    pts = [(i, j, order - i - j) for i in range(order + 1) for j in range(order + 1 - i)]
+    w = np.array(pts, dtype=float) / order
+    w.flags.writeable = False
+    return w
+
+
+@lru_cache(maxsize=32)
+def _interior_first(order: int) -> np.ndarray:
+    """The order-k grid's points, those farthest from the triangle's sides first (where a curved surface leaves the
+    triangle's plane most): a triangle over a stop value is found with few points."""
+    w = barycentric_grid(order)
+    out = w[np.argsort(-w.min(axis=1), kind="stable")]
+    out.flags.writeable = False
+    return out
+
+
+def exact_over(err: np.ndarray, threshold: float, nodes: np.ndarray, uv: np.ndarray, tris: np.ndarray,
+               surface: Surface, order: int = 6) -> np.ndarray:
+    """err (t,) of triangles tris (t, 3) over nodes (n, 3) with (u,v) (n, 2), every value over the threshold measured
+    again without a stop, so that it is the true maximum."""
+    over = np.flatnonzero(err > threshold)
+    if len(over):
+        err = err.copy()
+        t = tris[over]
+        err[over] = triangle_chordal_error(nodes[t], uv[t], surface, order, affine=surface.affine)
+    return err
+
+
+def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """(m,) max_i |S(u_i, v_i) − c_i| over the corners: the exact bound of ε_T when S is affine in (u,v) (a plane),
+    since every S(Σ w_i uv_i) − (plane of T) = Σ w_i (S(uv_i) − c_i) · n̂."""
+    exact = evaluate(uv.reshape(-1, 2)).reshape(-1, 3, 3)
+    return np.linalg.norm(exact - corners, axis=2).max(axis=1)
+
+
+def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray,
+              stop: float = np.inf) -> np.ndarray | None:
+    """ε_T by the fused, threaded kernel of _chordal_kernel.py, or None where the surface has none (OCCT-evaluated
+    kinds) or the call is too small to pay numba's start-up before the kernel is loaded (while the process's numpy
+    work stays under bspline.NUMPY_BUDGET)."""
+    kind = surface.closed_form
+    d = surface.data if surface.surface_type in ("bspline", "bezier") else None
+    if kind is None and d is None:
+        return None
+    if _kernels is None:
+        points = len(corners) * len(w)  # a B-spline's numpy points are counted where they are evaluated
+        if (points < COMPILED_MIN_POINTS and not _bspline.kernel_loaded()
+                and (d is not None or _bspline.spend_numpy(points))):
+            return None
+        load_kernels()
+    assert _kernels is not None
+    out = np.empty(len(corners))
+    corners = np.ascontiguousarray(corners, dtype=np.float64)
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    serial = len(corners) <= _kernels.BLOCK
+    if kind is not None:
+        fn = _kernels.analytic_chordal_serial if serial else _kernels.analytic_chordal_kernel
+        fn(kind[0], kind[1], corners, uv, w, float(stop), out)
+    else:
+        assert d is not None
+        if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
+            d["_pw"] = np.ascontiguousarray(np.concatenate([d["poles"] * d["weights"][..., None],
+                                                            d["weights"][..., None]], axis=2))
+        pw = d["_pw"]
+        per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
+        fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
+        fn(pw, np.ascontiguousarray(d["uknots"], dtype=np.float64), np.ascontiguousarray(d["vknots"], dtype=np.float64),
+           int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w), float(stop), out)
+    return out
+
+
+def triangle_chordal_error(
+    corners: np.ndarray, uv: np.ndarray, surface: Surface | Callable[[np.ndarray], np.ndarray], order: int = 6,
+    affine: bool = False, stop: float = np.inf,
+) -> np.ndarray:
+    """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v);
+    corners (m, 3, 3) mm, uv (m, 3, 2) on `surface` (a Surface, or its evaluate: (N, 2) → (N, 3)). Zero-area: 0.
+    affine=True (planes): the corner bound of affine_chordal_bound instead of sampling. A Surface with a closed
+    form or B-spline data is measured by the compiled kernel on large calls (same samples, same result); it may
+    leave a triangle's points at the first over `stop` (interior points first): a value over `stop` is then only
+    a lower bound (exact_over makes such values exact)."""
+    m = len(corners)
+    if m == 0:
+        return np.zeros(0)
+    evaluate = surface.evaluate if isinstance(surface, Surface) else surface
+    if affine:
+        return affine_chordal_bound(corners, uv, evaluate)
+    w = barycentric_grid(order)
+    if isinstance(surface, Surface):
+        fast = _compiled(surface, corners, uv, _interior_first(order) if stop < np.inf else w, stop)
+        if fast is not None:
+            return fast
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    norm = np.linalg.norm(normal, axis=1)
+    unit = np.divide(normal, norm[:, None], out=np.zeros_like(normal), where=norm[:, None] > 0)
+    out = np.empty(m)
+    step = max(1, _CHUNK_POINTS // len(w))
+    for s in range(0, m, step):
+        sl = slice(s, s + step)
+        pts_uv = np.einsum("pk,mkd->mpd", w, uv[sl]).reshape(-1, 2)
+        xyz = evaluate(pts_uv).reshape(-1, len(w), 3)
+        d = np.einsum("mpd,md->mp", xyz - corners[sl, None, 0], unit[sl])
+        out[sl] = np.abs(d).max(axis=1)
+    return out

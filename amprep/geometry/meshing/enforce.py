@@ -1,0 +1,221 @@
+"""Where the tolerance is kept: every face's chordal error measured, and any face over the tolerance re-meshed or
+refined where it fails (its edges split where their own sagitta exceeds it), for up to ENFORCE_ROUNDS rounds.
+
+Faces OCCT left unmeshed or broken are meshed here from the shared edge discretisation (face_mesher.py); a face
+over the tolerance whose boundary stands is mended locally (local_refine.py), any other meshed again whole.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from amprep.errors import AmprepError
+from amprep.geometry.cad.read import CadModel
+from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.topology import Topology, face_edges
+from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
+from amprep.geometry.meshing.face_mesher import discretize_missing_edges, has_pole, mesh_face, split_edge_to_tolerance
+from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
+from amprep.geometry.meshing.occt_check import patch_error
+from amprep.geometry.meshing.occt_read import FacePatch
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.parallel.face_pool import map_faces
+
+ENFORCE_ROUNDS = 4
+#: faces are refined until their sampled error is ≤ this × tolerance: the order-6 grid can miss up to ~0.5 %
+#: of the true maximum between its points (measured on a sphere against the exact distance), so aim below it
+ENFORCE_MARGIN = 0.98
+#: a face is re-meshed only when its sampled error exceeds this × tolerance (OCCT's mesh is kept otherwise)
+TRIGGER_MARGIN = 0.995
+#: a face sampled within (TRIGGER_MARGIN, 1] × tolerance is measured again on the order-24 grid (it contains the
+#: order-6 points; its miss is ~(6/24)² × 0.5 % = 0.03 %) and kept when that stays ≤ FINE_MARGIN × tolerance
+FINE_ORDER = 24
+FINE_MARGIN = 0.999
+#: a face of at least LOCAL_MIN_TRIANGLES with at most LOCAL_MAX_BAD of them over the target is refined where they
+#: are (local_refine.py); any other is meshed again whole: a fresh CDT packs the points better than OCCT's layout
+#: can be mended (a countersink cone's apex fan: 90 triangles re-meshed, 124 mended), and a small face costs little;
+#: so is a face with a pole or apex (a degenerated edge), where points mended into OCCT's fan make tilted triangles
+LOCAL_MIN_TRIANGLES = 1000
+LOCAL_MAX_BAD = 0.25
+#: re-meshing a face costs about this many triangles' time (face_pool's unit) whatever its size
+REMESH_PER_FACE = 100
+
+
+@dataclass
+class FaceStates:
+    """Every face of a model while its tolerance is enforced: patches (F,) (None: unmeshed), errors (F,) arrays of
+    per-triangle chordal error, why faces were meshed by us (`fallback`), and the faces no mesher could mesh."""
+
+    model: CadModel
+    topo: Topology
+    surfaces: list[Surface | None]
+    params: MeshParams
+    tol: float
+    min_area: float
+    patches: list[FacePatch | None]
+    fallback: dict[int, str]
+    errors: list[np.ndarray] = field(default_factory=list)
+    unmeshed: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.errors = [np.zeros(0)] * len(self.patches)
+
+
+def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progress: ProgressFn | None) -> None:
+    """Mesh the faces OCCT left to us, measure every face (first_error: errors already measured by occt_check), then
+    re-mesh or mend the faces over the tolerance until none is or ENFORCE_ROUNDS have run; `f` is updated."""
+    prog = Progress(progress)
+    todo = set(f.fallback)  # edges of faces that keep OCCT's mesh keep OCCT's discretisation; the rest from it
+    for round_ in range(ENFORCE_ROUNDS + 1):
+        stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
+        stage("re-meshing faces", 0.0)
+        _remesh(f, todo)
+        _measure(f, round_, todo, first_error, stage)
+        if not f.params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
+            break
+        over = [i for i in range(len(f.patches)) if f.patches[i] is not None and len(f.errors[i])
+                and np.nanmax(f.errors[i], initial=0) > f.tol * TRIGGER_MARGIN
+                and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
+        if not over:
+            break
+        todo = _split_edges(f, over)
+        _mend(f, over, todo)
+        for i in todo.union(over):
+            f.fallback.setdefault(i, "tolerance")
+        prog("enforcing tolerance", 0.5 + 0.08 * (round_ + 1))
+
+
+def _remesh(f: FaceStates, todo: set[int]) -> None:
+    """Mesh the faces of `todo` with a surface again from the shared edge discretisation (seeded with the interior
+    points of their old mesh); every edge is discretised first, before faces are meshed apart from each other."""
+    target = f.tol * ENFORCE_MARGIN
+    remesh = [i for i in todo if f.surfaces[i] is not None]
+    for i in remesh:
+        discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
+
+    def remesh_face(i: int) -> FacePatch | None:
+        old = f.patches[i]
+        seeds = None
+        if old is not None and old.uv is not None:
+            seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
+        try:
+            return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
+                             f.params.angular, f.params.check_order, seeds, f.min_area)
+        except AmprepError:
+            return None
+
+    for i, patch in _costliest_first(remesh_face, remesh, f.patches, f.errors, target).items():
+        f.patches[i] = patch
+        if patch is None:
+            f.unmeshed.append(i)
+
+
+def _measure(f: FaceStates, round_: int, todo: set[int], first_error: dict[int, np.ndarray], stage: Progress) -> None:
+    """The chordal error of every face in the first round (first_error where occt_check measured it), of the faces
+    of `todo` after."""
+    n = len(f.patches)
+    for i in range(n):
+        stage("measuring chordal error", 0.5 + 0.5 * i / n)
+        if f.patches[i] is None or not (round_ == 0 or i in todo):
+            continue
+        if round_ == 0 and i in first_error:
+            f.errors[i] = first_error[i]
+        else:
+            f.errors[i] = patch_error(f.patches[i], f.surfaces[i], f.params.check_order)
+
+
+def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
+    """Split the edges of the faces over the tolerance whose own sagitta exceeds the target (a face's boundary chords
+    bound its error); the faces of every split edge, which must be meshed again."""
+    target = f.tol * ENFORCE_MARGIN
+    todo: set[int] = set()
+    for i in over:
+        for edge in face_edges(f.model.faces[i]):
+            ei = f.topo.edge_index(edge)
+            before = f.topo.edge_params.get(ei)
+            if before is None:
+                continue
+            after = split_edge_to_tolerance(edge, before, target)
+            if len(after) != len(before):
+                f.topo.edge_params[ei] = after
+                todo |= _faces_of_edge(f.model, f.topo, ei)
+    return todo
+
+
+def _mend(f: FaceStates, over: list[int], todo: set[int]) -> None:
+    """Refine the faces over the tolerance whose boundary stands where they fail, the rest of their mesh kept
+    (large faces with few bad triangles and no pole); add every other face, and any mending fails, to `todo`."""
+    target = f.tol * ENFORCE_MARGIN
+    mend = []
+    for i in over:
+        if (i in todo or f.surfaces[i] is None or f.patches[i].uv is None  # type: ignore[union-attr]
+                or len(f.errors[i]) < LOCAL_MIN_TRIANGLES or np.mean(f.errors[i] > target) > LOCAL_MAX_BAD
+                or has_pole(f.model.faces[i])):
+            todo.add(i)
+        else:
+            mend.append(i)
+
+    def mend_face(i: int) -> FacePatch | None:
+        order = f.params.check_order
+        refined = refine_patch(f.patches[i], f.errors[i], f.surfaces[i], target, order)  # type: ignore[arg-type]
+        if refined is not None:
+            refined = flip_flat_triangles(refined, f.surfaces[i], target, order, f.min_area)  # type: ignore[arg-type]
+        return None if refined is None or flat_triangles(refined, f.min_area).any() else refined
+
+    for i, refined in _costliest_first(mend_face, mend, f.patches, f.errors, target).items():
+        if refined is None:
+            todo.add(i)
+        else:
+            f.patches[i], f.errors[i] = refined, refined.error  # type: ignore[assignment]
+
+
+def _costliest_first(fn: Callable[[int], FacePatch | None], faces: list[int], patches: list[FacePatch | None],
+                     errors: list[np.ndarray], target: float) -> dict[int, FacePatch | None]:
+    """{i: fn(i)} for the faces, through face_pool.map_faces, costliest first by _remesh_cost. In parallel only once
+    the compiled kernels run every chordal measure (numpy's floats differ in the last bits, and which faces a process
+    would measure in numpy depends on timing): the result stays deterministic."""
+    cost = {i: _remesh_cost(patches[i], errors[i], target) for i in faces}
+    order = sorted(faces, key=lambda i: (-cost[i], i))
+    return map_faces(fn, order, ready=kernels_loaded, cost=[cost[i] for i in order])
+
+
+def _remesh_cost(patch: FacePatch | None, error: np.ndarray, target: float) -> float:
+    """Time to re-mesh a face in triangles' worth: REMESH_PER_FACE plus the triangles its new mesh is expected to have,
+    Σ max(1, ε_T / target) over its old triangles (ε ∝ h², so a triangle ε/target over the target needs about that
+    many in its place), or its old triangle count when not measured."""
+    if patch is None:
+        return REMESH_PER_FACE
+    if len(error) != len(patch.tris) or not len(error):
+        return REMESH_PER_FACE + float(len(patch.tris))
+    return REMESH_PER_FACE + float(np.maximum(np.nan_to_num(error / target, nan=1.0), 1.0).sum())
+
+
+def _within_on_a_finer_grid(patch: FacePatch | None, surface: Surface | None, error: np.ndarray, tol: float) -> bool:
+    """A close call (sampled max in (TRIGGER_MARGIN·tol, tol]): the triangles over TRIGGER_MARGIN·tol measured again
+    on the order-FINE_ORDER grid, whose miss is (6/24)² of the order-6 grid's; True (and `error` updated) when they
+    are all ≤ FINE_MARGIN·tol, so the face keeps its mesh instead of being re-meshed for a sampling doubt."""
+    if patch is None or surface is None or patch.uv is None or not np.nanmax(error, initial=0) <= tol:
+        return False
+    band = np.flatnonzero(error > tol * TRIGGER_MARGIN)
+    t = patch.tris[band]
+    fine = triangle_chordal_error(patch.nodes[t], patch.uv[t], surface, FINE_ORDER, affine=surface.affine)
+    if fine.max(initial=0) > tol * FINE_MARGIN:
+        return False
+    error[band] = np.maximum(error[band], fine)
+    return True
+
+
+def _faces_of_edge(model: CadModel, topo: Topology, edge_index: int) -> set[int]:
+    """Ids of the faces bounded by a B-rep edge (cached edge → faces map on the topology)."""
+    cache = getattr(topo, "_edge_faces", None)
+    if cache is None:
+        cache = {}
+        for i, face in enumerate(model.faces):
+            for e in face_edges(face):
+                cache.setdefault(topo.edge_index(e), set()).add(i)
+        topo._edge_faces = cache  # type: ignore[attr-defined]
+    return cache.get(edge_index, set())

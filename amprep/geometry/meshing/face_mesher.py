@@ -1,0 +1,260 @@
+"""Mesh one face ourselves: constrained Delaunay in its (u,v) domain from the shared edge discretisation,
+refined until the chord tolerance holds (the approach of seed paper 000)."""
+
+from __future__ import annotations
+
+import numpy as np
+from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve
+from OCP.BRepTools import BRepTools_WireExplorer
+from OCP.GCPnts import GCPnts_TangentialDeflection
+from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
+
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.topology import Topology, explore, face_edges
+from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
+from amprep.geometry.meshing.local_refine import flip_flat_triangles, refine_patch
+from amprep.geometry.meshing.occt_read import FacePatch
+from amprep.geometry.meshing.uv_cdt import (
+    MAX_ROUNDS,
+    MIN_SPACING,
+    apart,
+    insertion_points,
+    metric_scale,
+    min_spacing,
+    recall_errors,
+    triangle_codes,
+    triangulate_pslg,
+)
+from amprep.geometry.meshing.uv_seed import curvature_seeds
+
+
+def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
+    """(n,) sorted parameters of an edge with no mesh yet, at the chord tolerance and angle (OCCT's GCPnts)."""
+    first, last = BRep_Tool.Range_s(edge)
+    if BRep_Tool.Degenerated_s(edge):
+        return np.linspace(first, last, 9)
+    curve = BRepAdaptor_Curve(edge)
+    disc = GCPnts_TangentialDeflection(curve, angular, tolerance, 3)
+    params = np.array([disc.Parameter(i) for i in range(1, disc.NbPoints() + 1)])
+    params = np.unique(np.clip(np.concatenate([[first, last], params]), first, last))
+    # GCPnts may return a parameter a hair from an end (seen: 2e-6 mm on CTC-02): a segment that short makes a
+    # needle with any third point; drop interior points nearer than MIN_SPACING × tolerance to the point before
+    # them or to the end
+    pts = np.array([curve.Value(t).Coord() for t in params])
+    eps = MIN_SPACING * tolerance
+    if (np.linalg.norm(np.diff(pts, axis=0), axis=1) > eps).all() and (
+            np.linalg.norm(pts[-1] - pts[1:-1], axis=1) > eps).all():
+        return params  # the usual case: no point too near another, nothing to walk
+    keep = np.ones(len(params), bool)
+    last_kept = pts[0]
+    for i in range(1, len(params) - 1):  # a drop moves the reference point: sequential, on the rare edge
+        if np.linalg.norm(pts[i] - last_kept) <= eps or np.linalg.norm(pts[-1] - pts[i]) <= eps:
+            keep[i] = False
+        else:
+            last_kept = pts[i]
+    return params[keep]
+
+
+def edge_sagitta(edge: TopoDS_Edge, params: np.ndarray) -> np.ndarray:
+    """(n−1,) max distance from the edge curve at 1/4, 1/2, 3/4 of each parameter segment to its chord."""
+    curve = BRepAdaptor_Curve(edge)
+    pts = np.array([curve.Value(t).Coord() for t in params])
+    fr = np.array([0.25, 0.5, 0.75])
+    mids = params[:-1, None] + fr[None, :] * np.diff(params)[:, None]
+    mid_pts = np.array([curve.Value(t).Coord() for t in mids.ravel()]).reshape(-1, 3, 3)
+    a, b = pts[:-1, None], pts[1:, None]
+    ab = b - a
+    len2 = np.maximum((ab * ab).sum(-1), 1e-300)
+    s = np.clip(((mid_pts - a) * ab).sum(-1) / len2, 0, 1)
+    return np.linalg.norm(mid_pts - (a + s[..., None] * ab), axis=-1).max(axis=1)
+
+
+def split_edge_to_tolerance(edge: TopoDS_Edge, params: np.ndarray, tolerance: float, rounds: int = 12) -> np.ndarray:
+    """Edge parameters with every segment whose sagitta exceeds the tolerance halved, until none does."""
+    if BRep_Tool.Degenerated_s(edge):
+        return params
+    for _ in range(rounds):
+        bad = edge_sagitta(edge, params) > tolerance
+        if not bad.any():
+            break
+        params = np.sort(np.concatenate([params, 0.5 * (params[:-1][bad] + params[1:][bad])]))
+    return params
+
+
+def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> None:
+    """Give every edge of the face with no discretisation yet its own (discretize_edge), in topo.edge_params."""
+    for edge in face_edges(face):
+        ei = topo.edge_index(edge)
+        if ei not in topo.edge_params:
+            topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
+
+
+def has_pole(face: TopoDS_Face) -> bool:
+    """True when the face has a degenerated edge (a pole or apex: a line of its (u,v) maps to one point)."""
+    return any(BRep_Tool.Degenerated_s(e) for e in face_edges(face))
+
+
+def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
+    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,); an edge with
+    no discretisation yet gets one."""
+    discretize_missing_edges(face, topo, tolerance, angular)
+    loops = []
+    for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
+        uvs, verts, edges, pars = [], [], [], []
+        wexp = BRepTools_WireExplorer(wire, face)
+        while wexp.More():
+            edge = TopoDS.Edge_s(wexp.Current())
+            ei = topo.edge_index(edge)
+            degenerate = BRep_Tool.Degenerated_s(edge)
+            params = topo.edge_params[ei]
+            if edge.Orientation() == TopAbs_REVERSED:
+                params = params[::-1]
+            pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+            if pcurve is None:
+                raise AmprepError(ErrorCode.MESHING_FAILED, "an edge of face has no curve on its surface")
+            v1, p1, v2, p2 = topo.edge_ends(edge)
+            n = len(params) - 1  # the last point starts the next edge
+            for t in params[:n]:
+                uvs.append(pcurve.Value(t).Coord())
+            vtx = np.full(n, -1, np.int64)
+            vtx[0] = v1 if abs(params[0] - p1) <= abs(params[0] - p2) else v2
+            if degenerate:
+                vtx[:] = vtx[0]
+            verts.append(vtx)
+            edges.append(np.where(vtx >= 0, -1, ei))
+            pars.append(np.where(vtx >= 0, np.nan, params[:n]))
+            wexp.Next()
+        if uvs:
+            loops.append(dict(uv=np.array(uvs, float), vertex=np.concatenate(verts),
+                              edge=np.concatenate(edges), param=np.concatenate(pars)))
+    return loops
+
+
+def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
+    """(N,) bool even-odd point-in-polygon over all loops (closed polygons (n, 2))."""
+    inside = np.zeros(len(points), bool)
+    x, y = points[:, 0:1], points[:, 1:2]
+    for poly in loops:
+        a, b = poly, np.roll(poly, -1, axis=0)
+        cond = (a[None, :, 1] > y) != (b[None, :, 1] > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xint = a[None, :, 0] + (y - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
+        inside ^= (cond & (x < xint)).sum(axis=1) % 2 == 1
+    return inside
+
+
+def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
+              angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0,
+              curvature_sized: bool = True) -> FacePatch:
+    """A FacePatch for one face: CDT of its boundary loops in scaled (u,v) plus interior points (when
+    `curvature_sized`, on a curved surface with a numpy evaluator and no pole, uv_seed.curvature_seeds' points in
+    their stretched space; else `seeds` (k, 2) interior (u,v) points, e.g. an earlier mesh's), points inserted
+    (longest inner edge midpoint, else centroid) in every triangle whose chordal error exceeds the tolerance, until
+    none does; then flat triangles (area ≤ min_area, or needles) flipped away where a flip keeps the tolerance
+    (patch_refine.flip_flat_triangles)."""
+    loops = boundary_loops(face, topo, tolerance, angular)
+    if not loops:
+        raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
+    b_uv = np.concatenate([lp["uv"] for lp in loops])
+    nb = len(b_uv)
+    length_scale = scale = metric_scale(surface, b_uv)
+    pole = has_pole(face)
+    # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
+    # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
+    if curvature_sized and not surface.affine and surface.exact_numpy and not pole:
+        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale)
+        if seeded is not None:
+            seeds, scale = seeded
+    spacing = min_spacing(tolerance, scale, length_scale)
+    seg, start = [], 0
+    for lp in loops:
+        n = len(lp["uv"])
+        idx = np.arange(start, start + n)
+        seg.append(np.stack([idx, np.roll(idx, -1)], axis=1))
+        start += n
+    segments = np.concatenate(seg)
+    scaled_loops = [lp["uv"] * scale for lp in loops]
+    pts = b_uv * scale
+    tris = triangulate_pslg(pts, segments)
+    cent = pts[tris].mean(axis=1)
+    holes = cent[~_inside(cent, scaled_loops)]
+    if seeds is not None and len(seeds):
+        # no inside test needed: a seed outside the boundary polygon lies in a hole or concavity that Triangle
+        # eats; such seeds are dropped after
+        pts = np.concatenate([pts, apart(np.unique(seeds * scale, axis=0), pts, spacing)])
+    tris = triangulate_pslg(pts, segments, holes)
+    used = np.zeros(len(pts), bool)
+    used[:nb] = True
+    used[tris] = True
+    if not used.all():
+        tris = (np.cumsum(used) - 1)[tris]
+        pts = pts[used]
+    xyz = surface.evaluate(pts / scale)
+    err = triangle_chordal_error(xyz[tris], (pts / scale)[tris], surface, order, affine=surface.affine,
+                                 stop=tolerance)
+    node_vertex = np.full(len(pts), -1, np.int64)
+    node_edge = np.full(len(pts), -1, np.int64)
+    node_param = np.full(len(pts), np.nan)
+    node_vertex[:nb] = np.concatenate([lp["vertex"] for lp in loops])
+    node_edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
+    node_param[:nb] = np.concatenate([lp["param"] for lp in loops])
+    # CDT triangles are counter-clockwise in (u,v): outward when the surface normal S_u × S_v points out
+    flip = face.Orientation() == TopAbs_REVERSED
+    patch = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris, node_vertex, node_edge,
+                      node_param, meshed_by="fallback", error=err)
+    if (err > tolerance).any():
+        # insertions re-triangulate only around them, except at a pole or apex (there a line of (u,v) is one point
+        # and a local re-triangulation leaves tilted triangles in the fan)
+        refined = None if pole else refine_patch(patch, err, surface, tolerance, order, scale=scale)
+        if refined is None:
+            pts, tris, xyz, err = _refine_globally(pts, tris, err, segments, holes, scale, xyz, surface, tolerance,
+                                                   order, spacing)
+            k = len(pts) - len(node_vertex)
+            refined = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris,
+                                np.concatenate([node_vertex, np.full(k, -1, np.int64)]),
+                                np.concatenate([node_edge, np.full(k, -1, np.int64)]),
+                                np.concatenate([node_param, np.full(k, np.nan)]), meshed_by="fallback", error=err)
+        patch = refined
+    return flip_flat_triangles(patch, surface, tolerance, order, min_area)
+
+
+def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segments: np.ndarray, holes: np.ndarray,
+                     scale: np.ndarray, xyz: np.ndarray, surface: Surface, tolerance: float,
+                     order: int, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The robust path when a local re-triangulation cannot be made: points inserted (no nearer than `spacing` to
+    another, in the space of pts = uv · scale) in every triangle over the tolerance and the whole face triangulated
+    again, until none is over (`err` (t,): the error of the first `tris`); returns (pts, tris, xyz, error)."""
+    affine = surface.affine
+    final_err = None
+    known_code, known_err = triangle_codes(tris, len(pts)), err
+    for _ in range(MAX_ROUNDS):
+        uv = pts / scale
+        if len(xyz) < len(pts):  # points are only ever appended: evaluate the new ones
+            xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
+        code = triangle_codes(tris, len(pts))
+        seen, err = recall_errors(len(tris), code, known_code, known_err)
+        fresh = ~seen
+        err[fresh] = triangle_chordal_error(xyz[tris[fresh]], uv[tris[fresh]], surface, order, affine=affine,
+                                            stop=tolerance)
+        known_code, known_err = code, err
+        bad = err > tolerance
+        if not bad.any():
+            final_err = err
+            break
+        seg_code = np.sort(segments.min(axis=1) * (len(pts) + 1) + segments.max(axis=1))
+        new = apart(insertion_points(pts, tris[bad], seg_code, len(pts) + 1), pts, spacing)
+        if not len(new):
+            break
+        pts = np.concatenate([pts, new])
+        tris = triangulate_pslg(pts, segments, holes)
+    uv = pts / scale
+    if len(xyz) < len(pts):
+        xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])
+    if final_err is None:  # rounds ran out after a last insertion: measure the triangles kept
+        final_err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, affine=affine)
+    return pts, tris, xyz, exact_over(final_err, tolerance, xyz, uv, tris, surface, order)
+
+

@@ -1,0 +1,187 @@
+"""Bring a meshed face within tolerance by re-triangulating only the neighbourhood of the triangles that exceed it
+(constrained Delaunay in scaled (u,v), new points inserted), keeping the rest of the mesh and every boundary node:
+each round costs what it adds, not the face's size. Mends OCCT's mesh of a face and refines the fallback's; flat
+triangles next to an apex are flipped away."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from amprep.errors import AmprepError
+from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.core.edges import edge_codes
+from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
+from amprep.geometry.meshing.occt_read import FacePatch
+from amprep.geometry.meshing.uv_cdt import (
+    MAX_ROUNDS,
+    apart,
+    in_sorted,
+    insertion_points,
+    metric_scale,
+    min_spacing,
+    recall_errors,
+    triangle_codes,
+    triangulate_pslg,
+)
+
+#: a re-triangulated region must cover the (u,v) area it replaced to this relative precision
+AREA_RTOL = 1e-9
+
+
+def _signed_area2(pts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(t,) twice the signed (u,v) area of each triangle (> 0: counter-clockwise)."""
+    a, b, c = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
+    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+
+def _retriangulate(pts: np.ndarray, region: np.ndarray, outside_seeds: np.ndarray,
+                   new: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """CDT of a region of triangles (r, 3) over pts (n, 2) with `new` (k, 2) points inside it, its boundary edges
+    kept as segments; returns (nodes (m,) global ids of its old nodes, triangles (r + 2k, 3) over
+    [pts[nodes]; new]) counter-clockwise, or None when Triangle's result does not tile the region exactly."""
+    nodes, local = np.unique(region, return_inverse=True)
+    local = local.reshape(region.shape)
+    code = edge_codes(local, len(nodes) + 1).ravel()
+    uniq, first, count = np.unique(code, return_index=True, return_counts=True)
+    once = first[count == 1]
+    a, b = local.ravel(), np.roll(local, -1, axis=1).ravel()
+    segments = np.stack([a[once], b[once]], axis=1)
+    vertices = np.concatenate([pts[nodes], new])
+    try:
+        tris = triangulate_pslg(vertices, segments, outside_seeds)
+    except AmprepError:
+        return None
+    if len(tris) != len(region) + 2 * len(new):
+        return None
+    area_old = np.abs(_signed_area2(pts, region)).sum()
+    area_new = _signed_area2(vertices, tris)
+    if (area_new <= 0).any() or abs(area_new.sum() - area_old) > AREA_RTOL * area_old:
+        return None
+    return nodes, tris
+
+
+def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, tolerance: float, order: int = 6,
+                 rounds: int = MAX_ROUNDS, scale: np.ndarray | None = None) -> FacePatch | None:
+    """The patch with every triangle whose chordal error `error` (t,) exceeds the tolerance replaced, with the
+    triangles sharing a node with it, by a CDT of that region plus one point per such triangle (midpoint of its
+    longest inner edge, else centroid), until none exceeds it; boundary nodes and all other triangles are kept
+    (`error` of the result is set). None when a region cannot be re-triangulated (a fold in the face's (u,v)).
+    Regions are re-triangulated in (u,v) · `scale` (2,), the space the patch was triangulated in (default:
+    metric_scale's, where OCCT's meshes are near-Delaunay); elsewhere a region's re-triangulation flips its
+    neighbours' diagonals and the bad triangles move instead of going."""
+    assert patch.uv is not None
+    tris, err = patch.tris, np.asarray(error, float)
+    length_scale = metric_scale(surface, patch.uv)
+    scale = length_scale if scale is None else np.asarray(scale, float)
+    spacing = min_spacing(tolerance, scale, length_scale)
+    pts = patch.uv * scale
+    xyz, uv = patch.nodes, patch.uv
+    sign = 1.0 if _signed_area2(pts, tris).sum() >= 0 else -1.0
+    codes, count = np.unique(edge_codes(tris, len(pts) + 1), return_counts=True)
+    boundary_pairs = np.stack(np.divmod(codes[count == 1], len(pts) + 1), axis=1)  # the face's boundary: kept
+    for _ in range(rounds):
+        bad = err > tolerance
+        if not bad.any():
+            break
+        base = len(pts) + 1
+        boundary = boundary_pairs[:, 0] * base + boundary_pairs[:, 1]
+        marked = np.zeros(len(pts), bool)
+        marked[tris[bad]] = True
+        in_region = marked[tris].any(axis=1)
+        region = tris[in_region]
+        new = insertion_points(pts, tris[bad], boundary, base)
+        new = apart(new, pts[np.unique(region)], spacing)
+        if not len(new):
+            break
+        # a hole seed in every kept triangle across an inner edge of the region's border: Triangle must not fill
+        # what the region surrounds (candidates: kept triangles with two nodes in the region)
+        in_nodes = np.zeros(len(pts), bool)
+        in_nodes[region] = True
+        near = np.flatnonzero(~in_region & (in_nodes[tris].sum(axis=1) >= 2))
+        rim_codes = np.unique(edge_codes(region, base))
+        rim_codes = rim_codes[~in_sorted(rim_codes, boundary)]
+        rim = near[in_sorted(edge_codes(tris[near], base), rim_codes).any(axis=1)]
+        seeds = pts[tris[rim]].mean(axis=1)
+        done = _retriangulate(pts, region, seeds, new)
+        if done is None:
+            return None
+        nodes, local = done
+        ids = np.concatenate([nodes, len(pts) + np.arange(len(new))])
+        fresh = ids[local]
+        if sign < 0:
+            fresh = fresh[:, [0, 2, 1]]
+        pts = np.concatenate([pts, new])
+        uv = np.concatenate([uv, new / scale])
+        xyz = np.concatenate([xyz, surface.evaluate(uv[-len(new):])])
+        seen, fresh_err = recall_errors(len(fresh), triangle_codes(fresh, len(pts)), triangle_codes(region, len(pts)),
+                                        err[in_region])
+        fresh_err[~seen] = triangle_chordal_error(xyz[fresh[~seen]], uv[fresh[~seen]], surface, order,
+                                                  affine=surface.affine, stop=tolerance)
+        tris = np.concatenate([tris[~in_region], fresh])
+        err = np.concatenate([err[~in_region], fresh_err])
+    k = len(pts) - len(patch.uv)
+    err = exact_over(err, tolerance, xyz, uv, tris, surface, order)
+    return replace(patch, nodes=xyz, uv=uv, tris=tris,
+                   node_vertex=np.concatenate([patch.node_vertex, np.full(k, -1, np.int64)]),
+                   node_edge=np.concatenate([patch.node_edge, np.full(k, -1, np.int64)]),
+                   node_param=np.concatenate([patch.node_param, np.full(k, np.nan)]),
+                   meshed_by="refined" if patch.meshed_by == "occt" else patch.meshed_by, error=err)
+
+
+#: a triangle is a needle when its area ≤ this × (longest edge)²
+NEEDLE_REL_AREA = 1e-10
+
+
+def flat_triangles(patch: FacePatch, min_area: float = 0.0, rel_eps: float = NEEDLE_REL_AREA) -> np.ndarray:
+    """(t,) bool: triangles the weld keeps (three distinct nodes, not two on one B-rep vertex) whose area is
+    ≤ rel_eps · (longest edge)² (a needle) or ≤ min_area (thinner than the output's degenerate check allows)."""
+    c = patch.nodes[patch.tris]
+    t = patch.tris
+    v = patch.node_vertex[t]
+    same_vertex = (((v[:, 0] == v[:, 1]) & (v[:, 0] >= 0)) | ((v[:, 1] == v[:, 2]) & (v[:, 1] >= 0))
+                   | ((v[:, 0] == v[:, 2]) & (v[:, 0] >= 0)))
+    distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    cross = np.cross(e1, e2)
+    area2_sq = np.einsum("ij,ij->i", cross, cross)  # (2·area)², compared squared: no square roots
+    e3 = e2 - e1
+    longest_sq = np.maximum(np.maximum(np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e2, e2)),
+                            np.einsum("ij,ij->i", e3, e3))
+    thin = (area2_sq <= (2 * rel_eps) ** 2 * longest_sq**2) | (area2_sq <= (2 * min_area) ** 2)
+    return distinct & thin & (longest_sq > 0)
+
+
+def flip_flat_triangles(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6,
+                        min_area: float = 0.0) -> FacePatch:
+    """The patch with each flat triangle (flat_triangles) swapped with its neighbour across its longest edge for the
+    other diagonal of their quad, where both new triangles keep the patch's (u,v) orientation, are not flat and are
+    within the tolerance: next to a pole or apex, where a line of (u,v) is one point, a Delaunay triangulation in
+    (u,v) joins three points that are collinear in space. Flat triangles with no such flip are left (the caller
+    sees them with flat_triangles)."""
+    flat = np.flatnonzero(flat_triangles(patch, min_area))
+    if not len(flat) or patch.uv is None or patch.error is None:
+        return patch
+    tris, err = patch.tris.copy(), patch.error.copy()
+    sign = 1.0 if _signed_area2(patch.uv, tris).sum() >= 0 else -1.0
+    for t in flat:
+        c = patch.nodes[tris[t]]
+        k = int(np.argmax(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1)))  # side k joins corners k, k+1
+        a, b, opposite = tris[t, k], tris[t, (k + 1) % 3], tris[t, (k + 2) % 3]
+        across = np.flatnonzero(((tris == b) | (tris == a)).sum(axis=1) == 2)
+        across = across[across != t]
+        if len(across) != 1:
+            continue  # the longest side is on the face's boundary: no flip
+        n = across[0]
+        d = int(tris[n][(tris[n] != a) & (tris[n] != b)][0])
+        new = np.array([[a, d, opposite], [d, b, opposite]])
+        trial = replace(patch, tris=new, error=None)
+        if (sign * _signed_area2(patch.uv, new) <= 0).any() or flat_triangles(trial, min_area).any():
+            continue
+        e = triangle_chordal_error(patch.nodes[new], patch.uv[new], surface, order, affine=surface.affine)
+        if e.max() > tolerance:
+            continue
+        tris[t], tris[n] = new
+        err[t], err[n] = e
+    return replace(patch, tris=tris, error=err)

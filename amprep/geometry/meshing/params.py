@@ -1,0 +1,47 @@
+"""The meshing parameters every mesher takes (a frozen dataclass: tolerance, angle, algorithm and switches)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from amprep.errors import AmprepError, ErrorCode
+
+
+@dataclass(frozen=True)
+class MeshParams:
+    """Meshing parameters: `tolerance` mm (absolute chord deviation) or `relative` (fraction of the bounding-box
+    diagonal, overrides tolerance), `angular` rad (the largest turn of one edge segment), `min_size` mm, `algorithm`
+    delabella | watson."""
+
+    tolerance: float = 0.1
+    relative: float | None = None
+    angular: float = 0.5
+    min_size: float = 0.0
+    algorithm: str = "delabella"
+    parallel: bool = True
+    enforce_tolerance: bool = True
+    force_fallback: bool = False
+    check_order: int = 6  # the barycentric grid order the faces' chordal error is checked on
+    occt_edges: bool = False  # every edge at half the tolerance and angle, as BRepMesh does (brepmesh.py)
+    own_large_faces: bool = True  # mesh large torus faces ourselves, not with BRepMesh (own_faces.py)
+    occt_surface_control: bool = False  # OCCT's own deflection check of face interiors (ours replaces it)
+
+    def validate(self) -> None:
+        """Raise invalid_parameter for values no mesher can honour."""
+        bad = None
+        if not (self.tolerance > 0 and np.isfinite(self.tolerance)):
+            bad = f"tolerance must be a positive number of mm, got {self.tolerance}"
+        elif self.relative is not None and not (0 < self.relative < 1):
+            bad = f"relative tolerance must be a fraction in (0, 1), got {self.relative}"
+        elif not (0 < self.angular <= np.pi / 2):
+            bad = f"angular deflection must be in (0, π/2] rad, got {self.angular}"
+        elif self.min_size < 0:
+            bad = f"min size must be ≥ 0, got {self.min_size}"
+        elif self.algorithm not in ("delabella", "watson"):
+            bad = f"algorithm must be delabella or watson, got {self.algorithm}"
+        elif not (1 <= self.check_order <= 30):
+            bad = f"check order must be 1..30, got {self.check_order}"
+        if bad:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, bad)

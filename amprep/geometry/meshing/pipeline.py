@@ -1,0 +1,119 @@
+"""CAD → closed mesh within the chord tolerance on every face: the one meshing entry point of every job.
+
+mesh_file reads a file and meshes it (the read and OCCT's first meshing in a forked child, read_ahead.py);
+mesh_model meshes a model already read. Both work out the tolerance once (prepare.py), read and check OCCT's mesh of
+every face (occt_check.py), enforce the tolerance on every face (enforce.py) and weld the faces by topology (weld.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from OCP.BRep import BRep_Tool
+
+from amprep.geometry.cad.read import CadModel
+from amprep.geometry.cad.surfaces import Surface, surface_of
+from amprep.geometry.cad.topology import Topology
+from amprep.geometry.core.checks import DEGENERATE_REL_AREA
+from amprep.geometry.core.mesh import FaceInfo, Mesh
+from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.measure.chordal import COMPILED_MIN_POINTS, barycentric_grid, load_kernels
+from amprep.geometry.meshing.enforce import FaceStates, enforce_tolerance
+from amprep.geometry.meshing.occt_check import first_look
+from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arrays
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.prepare import Prepared, prepare
+from amprep.geometry.meshing.read_ahead import read_and_prepare_ahead
+from amprep.geometry.meshing.tolerance import bbox_diagonal
+from amprep.geometry.meshing.weld import orient_stored_shells, weld
+
+
+@dataclass(frozen=True, eq=False)
+class MeshResult:
+    """The welded mesh and how it was made: `face_error` (F,) max chordal error per face (nan: no surface),
+    `tolerance` the absolute tolerance used, `fallback_faces` ids meshed by our own mesher, and why."""
+
+    mesh: Mesh
+    tolerance: float
+    face_error: np.ndarray
+    fallback_faces: dict[int, str]
+    unmeshed_faces: tuple[int, ...]
+
+    @property
+    def max_error(self) -> float:
+        e = self.face_error[np.isfinite(self.face_error)]
+        return float(e.max()) if len(e) else float("nan")
+
+
+def mesh_file(path: str | Path, fmt: str, params: MeshParams = MeshParams(),
+              progress: ProgressFn | None = None) -> tuple[CadModel, MeshResult]:
+    """(model, its mesh) of a CAD file: read and prepared in a forked child while this process loads the compiled
+    kernels (read_ahead.py), then meshed as mesh_model does."""
+    params.validate()
+    if progress:
+        progress("reading", 0.0)
+    prepared = read_and_prepare_ahead(path, fmt, params)
+    return prepared.model, mesh_prepared(prepared, params, progress)
+
+
+def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> MeshResult:
+    """Tessellate every face; re-mesh from the shared edge discretisation any face OCCT leaves unmeshed or
+    broken, and any face whose chordal error exceeds the tolerance (splitting its edges where their own
+    sagitta does), until every face is within tolerance; weld by topology."""
+    params.validate()
+    Progress(progress)("meshing", 0.0)
+    return mesh_prepared(prepare(model, params), params, progress)
+
+
+def mesh_prepared(prepared: Prepared, params: MeshParams, progress: ProgressFn | None) -> MeshResult:
+    """mesh_model's work after prepare(): OCCT's face meshes read and checked, the tolerance enforced, the welding."""
+    prog = Progress(progress)
+    prog("meshing", 0.4)
+    model, tol = prepared.model, prepared.tolerance
+    topo = Topology.of(model.shape)
+    n_faces = len(model.faces)
+    min_area = DEGENERATE_REL_AREA * bbox_diagonal(model, meshed=True) ** 2  # as checks.degenerate_mask has it
+    bulk = bulk_triangulation_arrays(model.faces) if not params.force_fallback else [None] * n_faces
+    surfaces: list[Surface | None] = [surface_of(f) if BRep_Tool.Surface_s(f) is not None else None
+                                      for f in model.faces]  # none: a tessellated-only face (stored triangles)
+    _load_kernels_for(bulk, surfaces, params.check_order)
+    prog("meshing", 0.45)
+    skip = ({i: "large_curved" for i in prepared.own} if not params.force_fallback
+            else dict.fromkeys(range(n_faces), "forced"))
+    looks = first_look(model.faces, topo, bulk, surfaces, skip, params.check_order, min_area)
+    patches: list[FacePatch | None] = []
+    fallback: dict[int, str] = {}
+    first_error: dict[int, np.ndarray] = {}
+    for i, look in enumerate(looks):
+        look.found.record(topo)
+        patches.append(look.found.assemble(model.faces[i], bulk[i]) if look.reason is None else None)
+        if look.reason is not None:
+            fallback[i] = look.reason
+        elif look.error is not None:
+            first_error[i] = look.error
+    prog("meshing", 0.5)
+    faces = FaceStates(model, topo, surfaces, params, tol, min_area, patches, fallback)
+    enforce_tolerance(faces, first_error, progress)
+    infos = tuple(
+        FaceInfo(i, surfaces[i].surface_type if surfaces[i] is not None else "none", model.face_solid[i],
+                 patches[i].meshed_by if patches[i] is not None else "none")
+        for i in range(n_faces)
+    )
+    prog("welding", 0.95)
+    mesh = orient_stored_shells(weld([p for p in patches if p is not None], infos, topo.vertex_roots()))
+    face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
+    prog("welding", 1.0)
+    return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))))
+
+
+def _load_kernels_for(bulk: list, surfaces: list[Surface | None], order: int) -> None:  # type: ignore[type-arg]
+    """Load the compiled kernels when every face's measure will pay numba's start-up once: a large part (B-splines
+    sooner: numpy evaluates them ~5× slower than closed forms)."""
+    points = len(barycentric_grid(order))
+    tri_count = [len(b[2]) if b is not None else 0 for b in bulk]
+    free_form = sum(n for n, sf in zip(tri_count, surfaces, strict=True) if sf is not None and sf.data is not None
+                    and sf.surface_type in ("bspline", "bezier"))
+    if sum(tri_count) * points >= COMPILED_MIN_POINTS or free_form * points >= COMPILED_MIN_POINTS / 3:
+        load_kernels()

@@ -1,0 +1,135 @@
+"""Constrained Delaunay in a face's metric-scaled (u,v) and the point insertion the meshers share: Triangle called
+safely, insertion points for triangles over tolerance, new points kept apart from old ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import triangle as tr
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.surfaces import Surface
+
+MAX_ROUNDS = 40
+#: points are inserted no closer than this × tolerance (in metric-scaled (u,v) ≈ mm) to another
+MIN_SPACING = 0.01
+
+
+def metric_scale(surface: Surface, uv: np.ndarray) -> np.ndarray:
+    """(2,) mean |∂S/∂u|, |∂S/∂v| over the boundary points, so that CDT in scaled (u,v) sees near-true lengths."""
+    h = 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-9)
+    sample = uv[:: max(1, len(uv) // 64)]
+    p = surface.evaluate(sample)
+    du = np.linalg.norm(surface.evaluate(sample + [h, 0]) - p, axis=1) / h
+    dv = np.linalg.norm(surface.evaluate(sample + [0, h]) - p, axis=1) / h
+    s = np.array([du.mean(), dv.mean()])
+    return np.where(s > 1e-12, s, 1.0)
+
+
+def min_spacing(tolerance: float, scale: np.ndarray, length_scale: np.ndarray) -> float:
+    """MIN_SPACING × tolerance in mm, as a distance in (u,v) · scale (2,) that keeps points at least that far apart
+    in the metric-scaled (u,v) · length_scale (2,) (≈ mm)."""
+    return MIN_SPACING * tolerance * float(np.max(np.asarray(scale) / length_scale))
+
+
+def triangulate_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None = None) -> np.ndarray:
+    """(t, 3) constrained Delaunay triangles of points (n, 2) and segments (s, 2), nothing added on a segment, the
+    parts holding a hole point (h, 2) and outside the segments removed. Triangle crashes the process on two equal
+    points or a hole point outside the convex hull: equal or non-finite points raise meshing_failed, hole points
+    outside are dropped (the outside is removed anyway); segments crossing or fewer than three points raise
+    meshing_failed."""
+    if len(pts) < 3:
+        raise AmprepError(ErrorCode.MESHING_FAILED, f"a face's (u,v) boundary has {len(pts)} point(s)")
+    if not np.isfinite(pts).all():
+        raise AmprepError(ErrorCode.MESHING_FAILED, "a face's (u,v) boundary has non-finite points")
+    if len(unique_points(pts)) != len(pts):
+        raise AmprepError(ErrorCode.MESHING_FAILED, "a face's boundary touches itself in (u,v)")
+    data = dict(vertices=pts, segments=segments)
+    if holes is not None and len(holes) and len(pts) >= 3:
+        try:
+            eq = ConvexHull(pts).equations
+        except QhullError:  # all points on a line: nothing to triangulate, nothing to hole
+            eq = None
+        if eq is not None:
+            size = float(np.ptp(pts, axis=0).max())
+            inside = holes[(holes @ eq[:, :2].T + eq[:, 2] < -1e-9 * size).all(axis=1)]
+            if len(inside):
+                data["holes"] = inside
+    out = tr.triangulate(data, "pYQ")
+    if len(out.get("vertices", [])) != len(pts):
+        raise AmprepError(ErrorCode.MESHING_FAILED, "the face's boundary in (u,v) self-intersects")
+    return out.get("triangles", np.zeros((0, 3), np.int64)).astype(np.int64)
+
+
+_CODE_BASE = 1 << 20
+
+
+def triangle_codes(tris: np.ndarray, n_points: int) -> np.ndarray | None:
+    """(t,) int64 code of each triangle's sorted vertex triple (a·B² + b·B + c), None past 2^20 points."""
+    if n_points >= _CODE_BASE:
+        return None
+    s = np.sort(tris, axis=1).astype(np.int64)
+    return (s[:, 0] * _CODE_BASE + s[:, 1]) * _CODE_BASE + s[:, 2]
+
+
+def recall_errors(n: int, codes: np.ndarray | None, old_codes: np.ndarray | None,
+                  old_err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(seen (n,) bool, err (n,)) for n triangles with triangle_codes `codes`: which were measured before, err[seen]
+    their earlier error (old_codes (s,) with old_err (s,), any order); err is unset where not seen, and nothing is
+    seen when either side has no codes."""
+    seen, err = np.zeros(n, bool), np.empty(n)
+    if codes is None or old_codes is None or not len(old_codes):
+        return seen, err
+    order = np.argsort(old_codes)
+    known = old_codes[order]
+    pos = np.minimum(np.searchsorted(known, codes), len(known) - 1)
+    seen = known[pos] == codes
+    err[seen] = old_err[order][pos[seen]]
+    return seen, err
+
+
+def apart(new: np.ndarray, pts: np.ndarray, eps: float) -> np.ndarray:
+    """The new (k, 2) points farther than eps from every existing point and from each other (the first kept): two
+    nodes closer than that gain nothing and may round to one vertex in a float32 STL (a degenerate triangle)."""
+    if not len(new):
+        return new
+    far = cKDTree(pts).query(new, distance_upper_bound=eps)[0] > eps
+    new = new[far]
+    if len(new) > 1:
+        pairs = cKDTree(new).query_pairs(eps, output_type="ndarray")
+        if len(pairs):
+            drop = np.zeros(len(new), bool)
+            for i, j in pairs[np.argsort(pairs[:, 1])]:  # keep the lower index of each close pair
+                if not drop[i]:
+                    drop[j] = True
+            new = new[~drop]
+    return new
+
+
+def in_sorted(values: np.ndarray, sorted_codes: np.ndarray) -> np.ndarray:
+    """values (any shape) bool: which occur in the sorted 1-D array (np.isin without its sort)."""
+    if not len(sorted_codes):
+        return np.zeros(values.shape, bool)
+    pos = np.minimum(np.searchsorted(sorted_codes, values), len(sorted_codes) - 1)
+    return sorted_codes[pos] == values
+
+
+def unique_points(pts: np.ndarray) -> np.ndarray:
+    """(k, 2) the distinct rows of (n, 2) float points, sorted by (x, y) (a row read as one complex number)."""
+    z = np.unique(np.ascontiguousarray(pts, dtype=np.float64).view(np.complex128).ravel())
+    return z.view(np.float64).reshape(-1, 2)
+
+
+def insertion_points(pts: np.ndarray, bad: np.ndarray, seg_code: np.ndarray, base: int) -> np.ndarray:
+    """(k, 2) one new point per bad triangle (k, 3): midpoint of its longest edge that is not a boundary
+    segment, else its centroid; seg_code: sorted codes lo·base + hi of the boundary segments."""
+    a, b = bad, np.roll(bad, -1, axis=1)
+    code = np.minimum(a, b).astype(np.int64) * base + np.maximum(a, b)
+    d = pts[a] - pts[b]
+    length = np.einsum("ijk,ijk->ij", d, d)
+    length[in_sorted(code, seg_code)] = -1.0
+    k = length.argmax(axis=1)
+    rows = np.arange(len(bad))
+    mid = 0.5 * (pts[a[rows, k]] + pts[b[rows, k]])
+    centroid = pts[bad].mean(axis=1)
+    return unique_points(np.where((length[rows, k] > 0)[:, None], mid, centroid))

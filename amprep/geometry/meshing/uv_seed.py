@@ -1,0 +1,149 @@
+"""Interior points for meshing a curved face from scratch, sized by its curvature: a chord of (u,v) step (a, b)
+deviates from the surface by ≈ |L a² + 2M ab + N b²| / 8 (L, M, N: the second fundamental form in (u,v)), so the
+face's (u,v) box is cut into cells whose sides and diagonals keep that under the target, and the cells' corners
+are the points. Delaunay in plain metric-scaled (u,v) joins such points across rows where the cells are long in
+one direction, so the points come with the space to triangulate them in: (u,v) stretched to make the typical cell
+square, the cells no longer than twice their width there."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from amprep.geometry.cad.surfaces import Surface
+
+#: a cell that needs at most this many parts per direction is cut into them; one that needs more into about
+#: their square root, its children then judged at their own centres
+EXACT_SPLIT = 16
+#: a cell needing up to this much more than a whole number of parts gets that number (refinement mends the few
+#: triangles over): a full extra part would cut the error to well under the target (≈ 2× the points)
+SLACK = 0.1
+MAX_SPLIT = 64
+MAX_LEVELS = 16
+#: the seeding gives up (None) past this many cells: the caller meshes without seeds and refines
+MAX_CELLS = 4_000_000
+#: cells at most this many times longer than wide in the triangulation space
+MAX_ASPECT = 2.0
+#: corners nearer the boundary than this × the cell's shorter side are dropped (no slivers along the boundary)
+KEEP_OFF = 0.25
+#: second derivatives by central differences with this step × the face's (u,v) extent
+DIFF_STEP = 1e-4
+
+_OFFSETS = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], float)
+_CORNERS = np.array([[-1, -1], [1, -1], [-1, 1], [1, 1]], float) * 0.5
+
+
+def second_form(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(L, M, N) each (n,): n·S_uu, n·S_uv, n·S_vv at uv (n, 2) by central differences with steps (2,) (0 where
+    the normal is undefined, as at a pole)."""
+    hu, hv = float(step[0]), float(step[1])
+    p = surface.evaluate((uv[:, None, :] + _OFFSETS[None] * [hu, hv]).reshape(-1, 2)).reshape(len(uv), 9, 3)
+    normal = np.cross(p[:, 1] - p[:, 2], p[:, 3] - p[:, 4])
+    length = np.linalg.norm(normal, axis=1)
+    normal /= np.where(length > 0, length, 1.0)[:, None]
+    s_uu = (p[:, 1] - 2 * p[:, 0] + p[:, 2]) / hu**2
+    s_vv = (p[:, 3] - 2 * p[:, 0] + p[:, 4]) / hv**2
+    s_uv = (p[:, 5] - p[:, 6] - p[:, 7] + p[:, 8]) / (4 * hu * hv)
+    return tuple(np.nan_to_num(np.einsum("ij,ij->i", normal, s)) for s in (s_uu, s_uv, s_vv))  # type: ignore[return-value]
+
+
+def _ranks(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(owner, rank) each (Σ counts,): item i of `counts` (n,) repeated counts[i] times, and 0 … counts[i] − 1."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    return owner, np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+
+
+def split_cells(centers: np.ndarray, sizes: np.ndarray, ku: np.ndarray, kv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cells (centers (n, 2), sizes (n, 2)) each cut into ku × kv (n,) equal cells: (centers, sizes) (Σ ku·kv, 2)."""
+    parent, j = _ranks(ku * kv)
+    k = np.stack([ku[parent], kv[parent]], axis=1)
+    child = sizes[parent] / k
+    index = np.stack([j % k[:, 0], j // k[:, 0]], axis=1)
+    return centers[parent] - sizes[parent] / 2 + child * (index + 0.5), child
+
+
+def _split_count(parts: np.ndarray) -> np.ndarray:
+    """(n,) int cuts of a cell that needs `parts` (n,) parts: all of them up to EXACT_SPLIT, else about their square
+    root (the children, judged at their own centres, cut again), at most MAX_SPLIT."""
+    k = np.ceil(parts - SLACK)
+    k = np.where(k > EXACT_SPLIT, np.ceil(np.sqrt(k)), k)
+    return np.clip(k, 1, MAX_SPLIT).astype(np.int64)
+
+
+def size_cells(surface: Surface, b_uv: np.ndarray, target: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Leaf cells (centers (n, 2), sizes (n, 2)) of the boundary's (u,v) box cut until, by the second form at each
+    cell's centre, the deviation of its sides (|L| a²/8, |N| b²/8) and diagonals (|L a² ± 2M ab + N b²|/8) is at
+    most `target`; None past MAX_CELLS."""
+    lo, hi = b_uv.min(axis=0), b_uv.max(axis=0)
+    span = np.maximum(hi - lo, 1e-12)
+    step = DIFF_STEP * span
+    centers, sizes = ((lo + hi) / 2)[None], span[None].copy()
+    leaf_c, leaf_s = [], []
+    bound = 8 * target
+    for _ in range(MAX_LEVELS):
+        L, M, N = second_form(surface, centers, step)
+        du, dv = sizes[:, 0], sizes[:, 1]
+        with np.errstate(divide="ignore"):
+            a = np.minimum(np.sqrt(bound / np.abs(L)), du)  # the longest sides each direction allows
+            b = np.minimum(np.sqrt(bound / np.abs(N)), dv)
+        diagonal = np.maximum(np.abs(L * a * a + 2 * M * a * b + N * b * b), np.abs(L * a * a - 2 * M * a * b + N * b * b))
+        shrink = np.sqrt(np.minimum(bound / np.maximum(diagonal, 1e-300), 1.0))
+        ku, kv = _split_count(du / (a * shrink)), _split_count(dv / (b * shrink))
+        leaf = (ku == 1) & (kv == 1)
+        leaf_c.append(centers[leaf])
+        leaf_s.append(sizes[leaf])
+        centers, sizes, ku, kv = centers[~leaf], sizes[~leaf], ku[~leaf], kv[~leaf]
+        if not len(centers):
+            break
+        if (ku * kv).sum() + sum(map(len, leaf_c)) > MAX_CELLS:
+            return None
+        centers, sizes = split_cells(centers, sizes, ku, kv)
+    leaf_c.append(centers)  # cells still over after MAX_LEVELS: refinement finishes them
+    leaf_s.append(sizes)
+    return np.concatenate(leaf_c), np.concatenate(leaf_s)
+
+
+def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
+    """(n,) bool: points (n, 2) farther than KEEP_OFF × shorter (n,) from every boundary polygon (closed, (m, 2)),
+    all in one space; the polygons are sampled at a quarter of the smallest such distance."""
+    spacing = max(KEEP_OFF * float(shorter.min()) / 2, 1e-12)
+    samples = []
+    for a in loops:
+        b = np.roll(a, -1, axis=0)
+        k = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / spacing).astype(np.int64), 1)
+        seg, j = _ranks(k)
+        t = j / k[seg]
+        samples.append(a[seg] + t[:, None] * (b - a)[seg])
+    reach = KEEP_OFF * shorter + spacing
+    # bounded: a point far inside (most of them) costs a walk through the whole tree otherwise (inf: beyond)
+    distance = cKDTree(np.concatenate(samples)).query(points, distance_upper_bound=float(reach.max()) * 1.01)[0]
+    return distance > reach
+
+
+def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float,
+                    length_scale: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(points (k, 2) interior (u,v) seeds, scale (2,) of the (u,v) space to triangulate them in) for a face with
+    boundary loops (closed (u,v) polygons (m, 2)), chords within `target`; `length_scale` (2,): metric_scale's
+    (u,v) → mm. None when the face needs more cells than MAX_CELLS or its box is degenerate."""
+    b_uv = np.concatenate(loops)
+    if (np.ptp(b_uv, axis=0) * length_scale <= 1e-9).any():
+        return None
+    cells = size_cells(surface, b_uv, target)
+    if cells is None:
+        return None
+    centers, sizes = cells
+    typical = np.median(sizes * length_scale, axis=0)
+    ratio = np.sqrt(typical[1] / typical[0])
+    scale = length_scale * np.array([ratio, 1 / ratio])
+    side = sizes * scale
+    ku = np.maximum(np.ceil(side[:, 0] / (MAX_ASPECT * side[:, 1])), 1).astype(np.int64)
+    kv = np.maximum(np.ceil(side[:, 1] / (MAX_ASPECT * side[:, 0])), 1).astype(np.int64)
+    centers, sizes = split_cells(centers, sizes, ku, kv)
+    corners = (centers[:, None] + _CORNERS[None] * sizes[:, None]).reshape(-1, 2)
+    shorter = np.repeat((sizes * scale).min(axis=1), 4)
+    lo, span = b_uv.min(axis=0), np.maximum(np.ptp(b_uv, axis=0), 1e-12)
+    key = np.round((corners - lo) / span * 2**30).astype(np.int64)  # cells share corners: one point each
+    _, first = np.unique(key[:, 0] * (2**31 + 1) + key[:, 1], return_index=True)
+    corners, shorter = corners[first], shorter[first]
+    keep = _off_boundary(corners * scale, shorter, [lp * scale for lp in loops])
+    return corners[keep], scale

@@ -1,0 +1,96 @@
+"""Join face patches into one Mesh by topology: a node on a B-rep vertex is that vertex, a node on a B-rep
+edge is (edge, parameter); tessellated-only faces (no surface) share nodes with identical coordinates,
+which is how their file shares its coordinate list."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
+from amprep.geometry.meshing.occt_read import FacePatch
+
+
+def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np.ndarray | None = None) -> Mesh:
+    """One Mesh from per-face patches; triangles that collapse onto one vertex (poles, apexes, edges the mesher
+    collapsed) are dropped. vertex_roots (n_brep_vertices,) maps B-rep vertices identified by collapsed edges."""
+    if not patches:
+        return Mesh.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), np.int64)).with_arrays(faces=faces)
+    nodes = np.concatenate([p.nodes for p in patches])
+    vert = np.concatenate([p.node_vertex for p in patches])
+    if vertex_roots is not None and len(vertex_roots):
+        vert = np.where(vert >= 0, vertex_roots[np.maximum(vert, 0)], -1)
+    edge = np.concatenate([p.node_edge for p in patches])
+    param = np.concatenate([p.node_param for p in patches])
+    stored = np.concatenate([np.full(len(p.nodes), p.meshed_by == "stored") for p in patches])
+    offsets = np.cumsum([0] + [len(p.nodes) for p in patches[:-1]])
+
+    n = len(nodes)
+    dim = np.full(n, IN_FACE, np.int8)
+    entity = np.concatenate([np.full(len(p.nodes), p.face_id, np.int64) for p in patches])
+    on_v = vert >= 0
+    on_e = (~on_v) & (edge >= 0)
+    free_stored = (~on_v) & (~on_e) & stored
+    interior = (~on_v) & (~on_e) & (~stored)
+    dim[on_v], entity[on_v] = ON_BREP_VERTEX, vert[on_v]
+    dim[on_e], entity[on_e] = ON_BREP_EDGE, edge[on_e]
+    # one mesh vertex per B-rep vertex, per (B-rep edge, parameter), per stored coordinate, per interior node
+    gid = np.empty(n, np.int64)
+    firsts: list[np.ndarray] = []
+    base = 0
+    for mask, key in ((on_v, vert[:, None]), (on_e, np.stack([edge, param], axis=1)), (free_stored, nodes),
+                      (interior, None)):
+        idx = np.flatnonzero(mask)
+        if key is None:
+            gid[idx] = base + np.arange(len(idx))
+            firsts.append(idx)
+            base += len(idx)
+            continue
+        _, f, inv = np.unique(key[idx], axis=0, return_index=True, return_inverse=True)
+        gid[idx] = base + inv.reshape(-1)
+        firsts.append(idx[f])
+        base += len(f)
+    first = np.concatenate(firsts)
+
+    tris = np.concatenate([gid[p.tris + o] for p, o in zip(patches, offsets, strict=False)])
+    face_ids = np.concatenate([np.full(len(p.tris), p.face_id, np.int32) for p in patches])
+    uv = np.concatenate([
+        p.uv[p.tris] if p.uv is not None else np.full((len(p.tris), 3, 2), np.nan) for p in patches
+    ])
+    keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
+    tris, face_ids, uv = tris[keep], face_ids[keep], uv[keep]
+    used = np.flatnonzero(np.bincount(tris.reshape(-1), minlength=len(first)))
+    remap = np.full(len(first), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    src = first[used]
+    return Mesh(
+        vertices=nodes[src], triangles=remap[tris], face_ids=face_ids, uv=uv,
+        vertex_dim=dim[src], vertex_entity=entity[src].astype(np.int32),
+        vertex_param=np.where(dim[src] == ON_BREP_EDGE, param[src], np.nan), faces=faces,
+    )
+
+
+def orient_stored_shells(mesh: Mesh) -> Mesh:
+    """Reverse every closed shell made only of stored (tessellated-only) faces whose signed volume is negative:
+    with no surface to orient them, a closed shell's own volume says which side is out."""
+    from amprep.geometry.core.checks import shell_labels, signed_volume
+    from amprep.geometry.core.edges import edge_incidence
+
+    stored = np.array([f.meshed_by == "stored" for f in mesh.faces], bool)
+    if mesh.n_triangles == 0 or not stored.any():
+        return mesh
+    n, label = shell_labels(mesh)
+    inc = edge_incidence(mesh.triangles)
+    open_tri = (inc.count[inc.edge_of] != 2).any(axis=1)
+    tris = mesh.triangles.copy()
+    uv = None if mesh.uv is None else mesh.uv.copy()
+    flipped = False
+    for s in range(n):
+        sel = label == s
+        if open_tri[sel].any() or not stored[mesh.face_ids[sel]].all():
+            continue
+        if signed_volume(mesh.corners[sel]) < 0:
+            tris[sel] = tris[sel][:, [0, 2, 1]]
+            if uv is not None:
+                uv[sel] = uv[sel][:, [0, 2, 1]]
+            flipped = True
+    return mesh.with_arrays(triangles=tris, uv=uv) if flipped else mesh

@@ -1,0 +1,129 @@
+"""The rigid motion that puts a user's STL on its CAD: axis permutations first, then least squares (ICP)."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from amprep.errors import AmprepError, ErrorCode
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """x_cad = R · x_stl + t; rms and max distance (mm) of the STL's points to the CAD after the fit."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    rms: float
+    max: float
+    permutation: str
+    inliers: float = 1.0  # fraction of STL points within the inlier distance of the CAD
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """(n, 3) STL-frame points → CAD frame."""
+        return points @ self.rotation.T + self.translation
+
+    def as_dict(self) -> dict[str, object]:
+        return {"rotation": self.rotation.round(12).tolist(), "translation": self.translation.round(9).tolist(),
+                "rms": self.rms, "max": self.max, "axis_permutation": self.permutation, "inlier_fraction": self.inliers,
+                "moved": bool(not np.allclose(self.rotation, np.eye(3)) or np.linalg.norm(self.translation) > 1e-9)}
+
+
+def signed_permutations() -> list[tuple[str, np.ndarray]]:
+    """The 24 rotations that map coordinate axes onto coordinate axes (det = +1), named like '+x+z-y'."""
+    out = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1, -1), repeat=3):
+            R = np.zeros((3, 3))
+            for row, (col, sgn) in enumerate(zip(perm, signs)):
+                R[row, col] = sgn
+            if np.linalg.det(R) > 0:
+                name = "".join(f"{'+' if s > 0 else '-'}{'xyz'[c]}" for c, s in zip(perm, signs))
+                out.append((name, R))
+    return out
+
+
+def kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """R, t minimising Σ w_i |R·src_i + t − dst_i|² (proper rotation)."""
+    w = np.ones(len(src)) if weights is None else np.asarray(weights, float)
+    w = w / w.sum()
+    cs, cd = w @ src, w @ dst
+    H = ((src - cs) * w[:, None]).T @ (dst - cd)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return R, cd - R @ cs
+
+
+def principal_frames(points: np.ndarray) -> list[np.ndarray]:
+    """The 4 proper frames (3, 3) (rows = axes) of a cloud's principal axes, largest variance first, up to signs."""
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    out = []
+    for sx, sy in itertools.product((1, -1), repeat=2):
+        f = vt * np.array([sx, sy, 1.0])[:, None]
+        if np.linalg.det(f) < 0:
+            f[2] = -f[2]
+        out.append(f)
+    return out
+
+
+def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float, stl_cloud: np.ndarray | None = None,
+          min_inliers: float = 0.6, iterations: int = 40, sample: int = 20_000,
+          rng: np.random.Generator | None = None) -> Alignment:
+    """Fit (n, 3) STL points onto a dense (p, 3) cloud on the CAD surface. Starts: the 24 axis rotations about the
+    bounding-box centres (STLs turned into print orientation) and the 4 matchings of principal axes about the
+    centroids (any other rotation); each is scored by the median nearest distance, the best few are refined by
+    trimmed ICP (points within 3× the median distance, so regions where the STL differs from the CAD do not pull
+    the fit).
+    rms and max are over the inliers (points within inlier_distance). stl_cloud: points spread evenly over the STL
+    (for the principal axes; default its vertices). Fewer than min_inliers of the points on the CAD: the STL does
+    not belong to it, AmprepError(stl_mismatch)."""
+    rng = rng or np.random.default_rng(0)
+    even = stl_cloud if stl_cloud is not None else stl_points
+    # points spread evenly by area: vertices crowd on small curved features, which turn freely about their axes
+    pts = even[rng.choice(len(even), min(sample, len(even)), replace=False)]
+    probe = pts
+    tree = cKDTree(cad_points)
+    starts: list[tuple[str, np.ndarray, np.ndarray]] = []
+    c_cad = (cad_points.min(axis=0) + cad_points.max(axis=0)) / 2
+    c_stl = (stl_points.min(axis=0) + stl_points.max(axis=0)) / 2
+    for name, R in signed_permutations():
+        starts.append((name, R, c_cad - R @ c_stl))
+    f_cad = principal_frames(cad_points)[0]
+    m_cad, m_stl = cad_points.mean(axis=0), even.mean(axis=0)
+    for f_stl in principal_frames(even):
+        R = f_cad.T @ f_stl
+        starts.append(("principal axes", R, m_cad - R @ m_stl))
+    scored = []
+    for name, R, t in starts:
+        d, _ = tree.query(probe @ R.T + t)
+        scored.append((float(np.median(d)), name, R, t))
+    scored.sort(key=lambda s: s[0])
+    best, best_key = None, (0.0, 0.0, 0.0)
+    for _, name, R, t in scored[:4]:  # symmetric parts: refine the few best starts, keep the best fit
+        for _ in range(iterations):
+            moved = pts @ R.T + t
+            d, idx = tree.query(moved)
+            keep = d <= max(3 * np.median(d), inlier_distance)
+            dR, dt = kabsch(moved[keep], cad_points[idx[keep]])
+            R, t = dR @ R, dR @ t + dt
+            if np.abs(dR - np.eye(3)).max() < 1e-12 and np.linalg.norm(dt) < 1e-12:
+                break
+        d, _ = tree.query(stl_points @ R.T + t)
+        inl = d <= inlier_distance
+        fit = Alignment(R, t, float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf"),
+                        float(d[inl].max(initial=0.0)), name, float(inl.mean()))
+        # a symmetric part fits several ways equally well: prefer the smallest rotation among equal fits
+        key = (round(fit.inliers, 3), -round(fit.rms / max(inlier_distance, 1e-12), 2), float(np.trace(R)))
+        if best is None or key > best_key:
+            best, best_key = fit, key
+    assert best is not None
+    if best.inliers < min_inliers:
+        raise AmprepError(ErrorCode.STL_MISMATCH, f"the STL does not fit this CAD: after the best rigid fit only "
+                          f"{100 * best.inliers:.0f} % of its vertices lie within {inlier_distance:.3g} mm of the CAD "
+                          f"(at least {100 * min_inliers:.0f} % needed)")
+    return best

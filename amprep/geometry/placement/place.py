@@ -1,0 +1,88 @@
+"""A user's STL put on its CAD: aligned (axis permutations, ICP, a fit to the exact surfaces), each triangle given
+its CAD face and each corner its (u,v)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from amprep.geometry.cad.read import CadModel
+from amprep.geometry.cad.surfaces import Surface, surface_of
+from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.core.progress import Progress
+from amprep.geometry.measure import cusp
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+
+
+@dataclass(frozen=True, eq=False)
+class PlacedStl:
+    """A user's STL put on its CAD: `mesh` in the CAD's frame with face ids and (u,v) by projection (face −1:
+    unmatched), `fit` the rigid motion (user → CAD), `tolerance` the match tolerance, `surfaces` per face id."""
+
+    mesh: Mesh
+    fit: Any
+    tolerance: float
+    surfaces: dict[int, Surface]
+    reference_faces: tuple
+
+    @property
+    def unmatched(self) -> int:
+        return int((self.mesh.face_ids < 0).sum())
+
+    def alignment(self) -> dict[str, Any]:
+        return self.fit.as_dict() | {"match_tolerance": self.tolerance, "unmatched_triangles": self.unmatched}
+
+
+def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: Progress | None = None) -> PlacedStl:
+    """Align an STL made elsewhere on its CAD (axis permutations, then ICP, then a fit to the exact surfaces) and
+    give each triangle its face and (u,v) by projection; stl_mismatch when it does not fit."""
+    from dataclasses import replace
+
+    from amprep.geometry.placement.align import align, kabsch
+    from amprep.geometry.placement.project import ReferenceCloud, isolate
+
+    prog = prog or Progress(None)
+    prog("reference tessellation", 0.0)
+    diag = float(np.linalg.norm(np.ptp(user.vertices, axis=0)))
+    ref_tol = min(mesh_params.tolerance, max(diag * 2e-4, 1e-3))
+    reference = mesh_model(model, replace(mesh_params, tolerance=ref_tol, relative=None), prog.span(0.0, 0.6))
+    spacing = max(diag / 400, 0.01)
+    cloud = ReferenceCloud.of(reference.mesh, spacing)
+    prog("aligning the STL on the CAD", 0.6)
+    tol = max(1e-3 * diag, 0.02)
+    even, _, _ = cusp.point_cloud(user.corners, 1.0, max_points=50_000)
+    fit = align(user.vertices, cloud.points, inlier_distance=tol + spacing, stl_cloud=even)
+    surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
+    prog("isolating faces", 0.8)
+    for _ in range(8):  # polish the fit against the exact surfaces: matched corners → their projections
+        placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
+        scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol)
+        ok = scored.face_ids >= 0
+        if ok.sum() < 3:
+            break
+        groups = [np.flatnonzero(scored.face_ids == f) for f in np.unique(scored.face_ids[ok])]
+        tgt = np.concatenate([surfaces[int(scored.face_ids[g[0]])].evaluate(scored.uv[g].reshape(-1, 2)) for g in groups])
+        tris = np.concatenate(groups)
+        src = placed.corners[tris].reshape(-1, 3)
+        _, area = cusp.unit_normals(placed.corners[tris])
+        dR, dt = kabsch(src, tgt, np.repeat(area, 3) + 1e-12)  # weighted by area, like the surface itself
+        fit = replace(fit, rotation=dR @ fit.rotation, translation=dR @ fit.translation + dt)
+        if np.abs(dR - np.eye(3)).max() < 1e-12 and np.linalg.norm(dt) < 1e-10:
+            break
+    placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
+    scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol)
+    d_ok = dist[scored.face_ids >= 0]
+    fit = replace(fit, rms=float(np.sqrt(np.mean(d_ok**2))) if d_ok.size else fit.rms,
+                  max=float(d_ok.max()) if d_ok.size else fit.max)
+    prog("placed", 1.0)
+    return PlacedStl(scored, fit, tol, surfaces, reference.mesh.faces)
+
+
+def unmatched_issue(placed: PlacedStl) -> dict[str, Any]:
+    """The issue entry for STL triangles that match no CAD face."""
+    return {"code": "unmatched_triangles", "severity": "warning", "count": placed.unmatched,
+            "message": f"STL triangles with a corner farther than {placed.tolerance:.3g} mm from every CAD "
+            "face: the STL differs from the CAD there (not scored)"}

@@ -1,0 +1,140 @@
+"""A user's STL on its CAD: which face each triangle tessellates, and each corner's (u,v) by projection."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.core.mesh import FaceInfo, Mesh
+from amprep.geometry.measure.chordal import barycentric_grid
+
+
+@dataclass(frozen=True)
+class ReferenceCloud:
+    """Dense points on a CAD tessellation: (p, 3) xyz, (p,) face id, (p, 2) (u,v) on that face."""
+
+    points: np.ndarray
+    face: np.ndarray
+    uv: np.ndarray
+
+    @classmethod
+    def of(cls, mesh: Mesh, spacing: float, max_order: int = 32) -> ReferenceCloud:
+        """Barycentric grids on every triangle of a tessellation that carries (u,v), of order ⌈longest edge /
+        spacing⌉ (at least 2, at most max_order), so large flat triangles are sampled as densely as small ones."""
+        keep = np.flatnonzero(mesh.face_ids >= 0)
+        corners = mesh.corners[keep]
+        longest = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).max(axis=1)
+        order = np.clip(np.ceil(longest / spacing), 2, max_order).astype(np.int64)
+        pts, face, uv = [], [], []
+        for k in np.unique(order):
+            sel = keep[order == k]
+            w = barycentric_grid(int(k))
+            pts.append(np.einsum("pk,mkd->mpd", w, mesh.corners[sel]).reshape(-1, 3))
+            face.append(np.repeat(mesh.face_ids[sel], len(w)))
+            uv.append(np.einsum("pk,mkd->mpd", w, mesh.uv[sel]).reshape(-1, 2) if mesh.uv is not None
+                      else np.zeros((len(sel) * len(w), 2)))
+        return cls(np.concatenate(pts), np.concatenate(face), np.concatenate(uv))
+
+
+def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Newton on |S(u,v) − p|² from uv0, all points at once, derivatives by central differences:
+    ((n, 2) (u,v), (n,) distance |S(u,v) − p|)."""
+    uv = np.array(uv0, dtype=float)
+    span = np.array([1.0, 1.0])
+    if surface.bounds is not None:
+        u1, u2, v1, v2 = surface.bounds
+        span = np.array([max(u2 - u1, 1e-9), max(v2 - v1, 1e-9)])
+    h = 1e-6 * span
+    for _ in range(iterations):
+        s = surface.evaluate(uv)
+        su = (surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0])) / (2 * h[0])
+        sv = (surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]])) / (2 * h[1])
+        r = s - points
+        a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+        gu, gv = (su * r).sum(1), (sv * r).sum(1)
+        det = a * c - b * b
+        ok = np.abs(det) > 1e-30
+        du = np.where(ok, -(c * gu - b * gv) / np.where(ok, det, 1), 0.0)
+        dv = np.where(ok, -(a * gv - b * gu) / np.where(ok, det, 1), 0.0)
+        step = np.stack([du, dv], 1)
+        limit = 0.25 * span  # no jumps across the domain from a bad start
+        uv = uv + np.clip(step, -limit, limit)
+        if np.abs(step / span).max(initial=0) < 1e-12:
+            break
+    return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1)
+
+
+def unwrap_corners(uv: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
+    """(m, 3, 2) corner parameters with each periodic one moved by whole periods next to the first corner's."""
+    out = np.array(uv, dtype=float)
+    for k, per in enumerate(periods):
+        if per:
+            ref = out[:, :1, k]
+            out[:, :, k] = ref + (out[:, :, k] - ref + per / 2) % per - per / 2
+    return out
+
+
+def _project_faces(corners: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
+                   trees: dict[int, tuple[np.ndarray, cKDTree]]) -> tuple[np.ndarray, np.ndarray]:
+    """((m, 3, 2) uv, (m, 3) distance) of triangles' corners projected on the surface of their given face."""
+    m = len(corners)
+    uv = np.zeros((m, 3, 2))
+    dist = np.full((m, 3), np.inf)
+    for fid in np.unique(face):
+        surf = surfaces.get(int(fid))
+        if surf is None or fid < 0:
+            continue
+        if fid not in trees:
+            own = np.flatnonzero(cloud.face == fid)
+            trees[int(fid)] = (own, cKDTree(cloud.points[own]))
+        own, tree = trees[int(fid)]
+        tris = np.flatnonzero(face == fid)
+        pts = corners[tris].reshape(-1, 3)
+        _, k = tree.query(pts)  # start each corner at the nearest sample of the same face
+        p_uv, d = project_points(surf, pts, cloud.uv[own[k]])
+        uv[tris] = unwrap_corners(p_uv.reshape(-1, 3, 2), surf.periods)
+        dist[tris] = d.reshape(-1, 3)
+    return uv, dist
+
+
+def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], faces: tuple[FaceInfo, ...],
+            tolerance: float, candidates: int = 6) -> tuple[Mesh, np.ndarray]:
+    """Give each triangle of a (CAD-frame) mesh the CAD face it tessellates: the faces of the samples nearest its
+    centroid are tried in order, the corners projected on each face's surface for (u,v), and the first face with
+    every corner within `tolerance` of its surface is kept (else face −1); (the mesh with face_ids, uv and faces,
+    (m, 3) corner distances to the chosen face's surface)."""
+    corners = mesh.corners
+    m = len(corners)
+    _, near = cKDTree(cloud.points).query(corners.mean(axis=1), k=8 * candidates)
+    near_faces = cloud.face[near]  # (m, k) faces of the nearest samples, nearest first
+    face_ids = np.full(m, -1, np.int32)
+    uv = np.zeros((m, 3, 2))
+    dist = np.full((m, 3), np.inf)
+    trees: dict[int, tuple[np.ndarray, cKDTree]] = {}
+    todo = np.arange(m)
+    tried = np.full((m, 1), -2, np.int64)
+    for _ in range(candidates):
+        if len(todo) == 0:
+            break
+        # the nearest face not tried yet, per triangle still unmatched
+        nf = near_faces[todo]
+        fresh = ~(nf[:, :, None] == tried[todo][:, None, :]).any(axis=2)
+        has = fresh.any(axis=1)
+        todo = todo[has]
+        if len(todo) == 0:
+            break
+        pick = nf[has][np.arange(len(todo)), np.argmax(fresh[has], axis=1)]
+        tried = np.concatenate([tried, np.full((m, 1), -2, np.int64)], axis=1)
+        tried[todo, -1] = pick
+        p_uv, d = _project_faces(corners[todo], pick, cloud, surfaces, trees)
+        better = d.max(axis=1) < dist[todo].max(axis=1)
+        uv[todo[better]], dist[todo[better]] = p_uv[better], d[better]
+        ok = (d <= tolerance).all(axis=1)
+        face_ids[todo[ok]] = pick[ok]
+        todo = todo[~ok]
+    out = Mesh(mesh.vertices, mesh.triangles, face_ids, uv=uv,
+               faces=tuple(FaceInfo(f.id, f.surface_type, f.solid, "stl") for f in faces))
+    return out, dist

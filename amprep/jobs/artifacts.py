@@ -1,0 +1,67 @@
+"""The files of a job's result written to a directory: report.json, the scored or refined mesh, per-triangle fields
+and the plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from amprep.geometry.io import plots
+from amprep.geometry.io.stl import write_stl
+from amprep.geometry.io.write import write_mesh
+from amprep.geometry.measure.analysis import Analysis
+from amprep.geometry.measure.regularity import regularity
+from amprep.jobs.refine import RefineResult
+
+#: Per-triangle fields for the viewer: little-endian float32, one value per triangle of mesh.stl, NaN = unknown.
+FIELDS = ("chordal_error", "cusp_height")
+
+
+def write_analysis(a: Analysis, out_dir: Path, with_plots: bool = True) -> list[Path]:
+    """Files of an analysis under out_dir; returns their paths (report.json first)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    report = out_dir / "report.json"
+    report.write_text(json.dumps(a.report, indent=1, default=float, allow_nan=False))
+    paths = [report]
+    mesh = out_dir / "mesh.stl"
+    write_stl(a.mesh, mesh, header="amprep analysis: the mesh the report scores")
+    paths.append(mesh)
+    for name, values in zip(FIELDS, (a.chordal, a.cusp_height)):
+        p = out_dir / f"{name}.f32"
+        p.write_bytes(np.asarray(values, "<f4").tobytes())
+        paths.append(p)
+    if with_plots:
+        if a.box is not None:
+            paths.append(plots.cusp_per_slice(a.box, a.report["cusp_height"]["approximate"]["mean"],
+                                              out_dir / "cusp_per_slice.png"))
+        if a.report["faces"]:
+            paths.append(plots.chordal_per_face(a.report["faces"], a.report["input"].get("tolerance"),
+                                                out_dir / "chordal_per_face.png"))
+        paths.append(plots.regularity_histograms(regularity(a.mesh.corners), out_dir / "regularity.png"))
+    return paths
+
+
+def write_refinement(r: RefineResult, out_dir: Path, name: str = "refined.stl", ascii: bool = False,
+                     with_plots: bool = True) -> list[Path]:
+    """The refined mesh (STL or 3MF by `name`, in the user's frame), report.json, chordal_error.f32 of the refined
+    mesh and error_vs_size.png; returns their paths (the mesh first)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mesh_path = write_refined_mesh(r, out_dir / name, ascii)
+    report = out_dir / "report.json"
+    report.write_text(json.dumps(r.report, indent=1, default=float, allow_nan=False))
+    field = out_dir / "chordal_error.f32"
+    field.write_bytes(np.asarray(r.chordal, "<f4").tobytes())
+    paths = [mesh_path, report, field]
+    if with_plots and r.report.get("comparison"):
+        paths.append(plots.error_vs_size(r.report["comparison"], out_dir / "error_vs_size.png"))
+    return paths
+
+
+def write_refined_mesh(r: RefineResult, out: Path, ascii: bool = False) -> Path:
+    """The refined mesh as binary/ASCII STL or 3MF by the extension; header/metadata name the method and versions."""
+    p = r.report.get("provenance", {})
+    header = f"amprep {p.get('amprep')} occt {p.get('occt')} refine {r.report['method']} {r.report['params']['ratios']}"
+    write_mesh(r.mesh, out, header, r.report["input"].get("sha256", ""), ascii)
+    return out

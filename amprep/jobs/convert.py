@@ -1,0 +1,119 @@
+"""The convert job: read any supported input, mesh CAD closed within tolerance, check, write STL or 3MF."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.checks import MeshChecks, check_mesh, float32_degenerate_count, manifold3d_accepts
+from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.core.progress import ProgressFn
+from amprep.geometry.io.stl import read_stl
+from amprep.geometry.io.write import write_mesh
+from amprep.geometry.measure.mesh_report import mesh_section
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import MeshResult, mesh_file
+from amprep.geometry.parallel.forked import Forked
+from amprep.jobs.common import STL_INFO, input_of, is_cad, model_info, provenance
+
+
+@dataclass(frozen=True, eq=False)
+class ConvertResult:
+    """A converted part: the mesh, its checks and how it was made (`meshing` is None for STL passthrough)."""
+
+    mesh: Mesh
+    input: dict[str, Any]
+    checks: MeshChecks
+    manifold3d: bool
+    meshing: MeshResult | None
+    provenance: dict[str, Any]
+    notes: list[str] = field(default_factory=list)
+    float32_degenerate: int = 0  # triangles degenerate only after rounding to the file's float32 coordinates
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready summary of the conversion (the `convert` part of a job's report)."""
+        c = self.checks
+        out: dict[str, Any] = {
+            "input": self.input,
+            "mesh": mesh_section(self.mesh, c, self.manifold3d)
+            | {"float32_degenerate_triangles": self.float32_degenerate},
+            "provenance": self.provenance,
+            "notes": self.notes,
+        }
+        if self.meshing is not None:
+            m = self.meshing
+            out["meshing"] = {
+                "tolerance": m.tolerance,
+                "max_chordal_error": m.max_error,
+                "within_tolerance": bool(m.max_error <= m.tolerance * (1 + 1e-9)) if m.max_error == m.max_error else None,
+                "fallback_faces": {str(k): v for k, v in sorted(m.fallback_faces.items())},
+                "unmeshed_faces": list(m.unmeshed_faces),
+            }
+        return out
+
+
+#: output checks of a mesh this large run beside manifold3d's in a forked child (forking costs ~10 ms)
+FORK_CHECKS_MIN = 100_000
+
+
+def output_checks(mesh: Mesh) -> tuple[MeshChecks, int]:
+    """(check_mesh, float32_degenerate_count) of a mesh."""
+    degenerate = np.zeros(mesh.n_triangles, bool)
+    checks = check_mesh(mesh, degenerate)
+    return checks, float32_degenerate_count(mesh, degenerate)
+
+
+def convert(path: str | Path, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> ConvertResult:
+    """Read `path` and return its closed mesh within tolerance (CAD) or its checked mesh (STL passthrough)."""
+    params.validate()
+    fmt, info = input_of(path)
+    notes: list[str] = []
+    meshing = None
+    if is_cad(fmt):
+        model, meshing = mesh_file(path, fmt, params, progress)
+        info.update(model_info(model))
+        if model.units == "none":
+            notes.append("the file declares no length unit: read as millimetres")
+        if model.sewn:
+            notes.append("loose faces were sewn into shells")
+        mesh = meshing.mesh
+        if meshing.unmeshed_faces:
+            notes.append(f"{len(meshing.unmeshed_faces)} face(s) could not be meshed")
+    else:
+        mesh = read_stl(path)
+        info.update(STL_INFO)
+        notes.append("STL input passed through: no unit in the file, values taken as millimetres")
+    if mesh.n_triangles == 0:
+        raise AmprepError(ErrorCode.EMPTY_MODEL, "the model produced no triangles")
+    # our own checks in a forked child while manifold3d (which holds the GIL) runs here
+    own = Forked(output_checks, mesh, fork=mesh.n_triangles >= FORK_CHECKS_MIN)
+    ok3d = manifold3d_accepts(mesh)
+    try:
+        checks, rounded = own.result()
+    except AmprepError:  # the child died: check here
+        checks, rounded = output_checks(mesh)
+    if rounded:
+        notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
+                     "store (a part far from the origin at a micron tolerance)")
+    if not checks.closed:
+        notes.append(f"the mesh is open: {checks.boundary_edges} boundary and {checks.nonmanifold_edges} non-manifold edges")
+    return ConvertResult(mesh, info, checks, ok3d, meshing, provenance(params if meshing else None), notes, rounded)
+
+
+def header_text(result: ConvertResult) -> str:
+    """≤ 80-character STL header naming the tools and parameters that made the mesh."""
+    p = result.provenance
+    text = f"amprep {p['amprep']} occt {p['occt']} cq {p['cadquery']}"
+    if result.meshing is not None:
+        params = p["params"]
+        text += f" tol {result.meshing.tolerance:g}mm ang {params['angular']:g} {params['algorithm']}"
+    return text[:80]
+
+
+def write_result(result: ConvertResult, out: str | Path, ascii: bool = False) -> dict[str, Any]:
+    """Write the mesh by the output's extension (.stl binary or ASCII, .3mf); returns what was written."""
+    return write_mesh(result.mesh, out, header_text(result), result.input.get("sha256", ""), ascii)

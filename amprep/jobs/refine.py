@@ -1,0 +1,117 @@
+"""The refine job: choose faces, refine them (SMA, VTA or adaptive), and prove it: per-face numbers before/after, the
+mesh checks before/after, and the comparison with uniform re-tessellations of the whole part."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.edge_curves import EdgeCurves
+from amprep.geometry.cad.read import read_cad
+from amprep.geometry.cad.surfaces import Surface, surface_of
+from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh, face_chordal_errors, faces_section
+from amprep.geometry.measure.regularity import regularity
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_file
+from amprep.geometry.placement.place import PlacedStl, place_user_stl, unmatched_issue
+from amprep.geometry.refine.compare import (
+    STL_HEADER,
+    STL_PER_TRIANGLE,
+    RefineParams,
+    compare,
+    mesh_summary,
+    predicted_size,
+    refine_faces,
+    refine_params_section,
+    refined_faces,
+    select_faces,
+    topology_issues,
+)
+from amprep.jobs.common import input_of, is_cad, model_info, provenance, read_mesh, sha256_file
+
+
+@dataclass(frozen=True, eq=False)
+class RefineResult:
+    """The refined mesh in the user's frame (`mesh`), the one scored in the CAD's frame (`cad_mesh`), the mesh
+    before, the report, and per-triangle chordal error of `mesh`."""
+
+    mesh: Mesh
+    cad_mesh: Mesh
+    before: Mesh
+    report: dict[str, Any]
+    chordal: np.ndarray
+    surfaces: dict[int, Surface] = field(default_factory=dict)
+    faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+
+def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: MeshParams = MeshParams(tolerance=0.2),
+                params: RefineParams = RefineParams(), progress: ProgressFn | None = None) -> RefineResult:
+    """Refine a CAD part's tessellation, or (with `stl`) the user's own STL placed on the CAD, and report."""
+    params.validate()
+    prog = Progress(progress)
+    fmt, info = input_of(path)
+    if not is_cad(fmt):
+        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"{params.method.upper()} refines faces of a CAD model: give "
+                          "the STEP, IGES or BREP (and the STL with --stl); STL-only refinement is not available yet")
+    placed: PlacedStl | None = None
+    if stl is not None:
+        prog("reading", 0.0)
+        model = read_cad(path, fmt)
+        user = read_mesh(stl)
+        placed = place_user_stl(model, user, mesh_params, prog.span(0.02, 0.4))
+        mesh, surfaces = placed.mesh, placed.surfaces
+        info.update(model_info(model), source="user_stl", stl_sha256=sha256_file(stl), stl_triangles=user.n_triangles)
+        base_tol = float(mesh_params.tolerance)
+    else:
+        model, res = mesh_file(path, fmt, mesh_params, prog.span(0.02, 0.3))
+        mesh, base_tol = res.mesh, res.tolerance
+        surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
+        info.update(model_info(model), source="tessellation", tolerance=res.tolerance)
+    n_faces = len(model.faces)
+    ap = AnalysisParams(params.layer, params.build_dir, params.sample_order, bounding_box=False)
+    before = faces_section(mesh, face_chordal_errors(mesh, surfaces, params.sample_order), surfaces, ap,
+                           regularity(mesh.corners), n_faces)
+    chosen = select_faces(before, params, n_faces)
+    faces = np.array(sorted(chosen), dtype=np.int64)
+    size = predicted_size(params.method, mesh, faces, params.iterations)
+    if size > params.max_triangles:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"{params.method.upper()} would output {size:,} triangles, over "
+                          f"the limit of {params.max_triangles:,}: choose fewer faces, fewer iterations or a coarser input")
+    curves = EdgeCurves(model) if placed is None else None  # a user's STL has no B-rep edges behind its vertices
+    worst = max((before[f]["chordal_error"] or {}).get("max", 0.0) for f in faces) if len(faces) else 0.0
+    target = params.target if params.target is not None else (0.1 * worst if worst > 0 else 1.0)
+    prog("refining", 0.45)
+    ref = refine_faces(params.method, mesh, faces, surfaces, params, params.iterations, curves, target)
+    out = ref.mesh
+    prog("scoring", 0.55)
+    analysis = analyze_mesh(out, ap, surfaces, n_faces, info, None, prog.span(0.55, 0.6))
+    report = analysis.report
+    mesh_before, mesh_after = mesh_summary(mesh), report["mesh"]
+    mesh_after["file_size"] = STL_HEADER + STL_PER_TRIANGLE * out.n_triangles
+    issues = report["issues"] + topology_issues(mesh_before, mesh_after)
+    if placed is not None and placed.unmatched:
+        issues.append(unmatched_issue(placed))
+    if not len(faces):
+        issues.append({"code": "nothing_to_refine", "severity": "info", "count": 0,
+                       "message": "no face exceeds the thresholds: the mesh is returned unchanged"})
+    comparison = None
+    if params.compare:
+        prog("comparing with uniform tessellations", 0.6)
+        comparison = compare(model, mesh, out, faces, surfaces, params, mesh_params, base_tol, curves, target)
+    report["params"] = refine_params_section(params, target)
+    report.update(method=params.method, mesh_before=mesh_before,
+                  refined_faces=refined_faces(faces, before, report["faces"], chosen, ref), comparison=comparison,
+                  issues=issues, provenance=provenance(mesh_params))
+    user_frame = out
+    if placed is not None:
+        report["alignment"] = placed.alignment()
+        R, t = np.asarray(placed.fit.rotation), np.asarray(placed.fit.translation)
+        user_frame = replace(out, vertices=(out.vertices - t) @ R)  # x_user = Rᵀ (x_cad − t)
+    prog("done", 1.0)
+    return RefineResult(user_frame, out, mesh, report, analysis.chordal, surfaces, faces)
