@@ -23,7 +23,7 @@ def analyze_file(path: str | Path, stl: str | Path | None = None, mesh_params: M
     if not is_cad(fmt):
         info.update(STL_INFO, source="stl")
         a = analyze_mesh(read_mesh(path), params, None, 0, info, None, prog.span(0.0, 1.0))
-        a.report["provenance"] = provenance()
+        a.extra["provenance"] = provenance()
         return a
     if stl is not None:
         prog("reading", 0.0)
@@ -32,13 +32,13 @@ def analyze_file(path: str | Path, stl: str | Path | None = None, mesh_params: M
         placed = place_user_stl(model, user, mesh_params, prog.span(0.05, 0.5))
         info.update(model_info(model), source="user_stl", stl_sha256=sha256_file(stl), stl_triangles=user.n_triangles)
         a = analyze_mesh(placed.mesh, params, placed.surfaces, len(model.faces), info, None, prog.span(0.5, 1.0))
-        a.report["alignment"] = placed.alignment()
+        a.extra["alignment"] = placed.alignment()
         if placed.unmatched:
-            a.report["issues"].append(unmatched_issue(placed))
+            a.issues.append(unmatched_issue(placed))
     else:
         model, result = mesh_file(path, fmt, mesh_params, prog.span(0.0, 0.5))
         info.update(model_info(model), source="tessellation", tolerance=result.tolerance)
         surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
         a = analyze_mesh(result.mesh, params, surfaces, len(model.faces), info, result.tolerance, prog.span(0.5, 1.0))
-    a.report["provenance"] = provenance(mesh_params)
+    a.extra["provenance"] = provenance(mesh_params)
     return a

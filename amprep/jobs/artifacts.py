@@ -34,10 +34,10 @@ def write_analysis(a: Analysis, out_dir: Path, with_plots: bool = True) -> list[
         paths.append(p)
     if with_plots:
         if a.box is not None:
-            paths.append(plots.cusp_per_slice(a.box, a.report["cusp_height"]["approximate"]["mean"],
+            paths.append(plots.cusp_per_slice(a.box, a.cusp["approximate"]["mean"],
                                               out_dir / "cusp_per_slice.png"))
-        if a.report["faces"]:
-            paths.append(plots.chordal_per_face(a.report["faces"], a.report["input"].get("tolerance"),
+        if a.faces:
+            paths.append(plots.chordal_per_face(a.faces, a.input.get("tolerance"),
                                                 out_dir / "chordal_per_face.png"))
         paths.append(plots.regularity_histograms(regularity(a.mesh.corners), out_dir / "regularity.png"))
     return paths

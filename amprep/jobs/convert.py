@@ -14,7 +14,7 @@ from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import ProgressFn
 from amprep.geometry.io.stl import read_stl
 from amprep.geometry.io.write import write_mesh
-from amprep.geometry.measure.mesh_report import mesh_section
+from amprep.geometry.measure.report import mesh_section
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import MeshResult, mesh_file
 from amprep.geometry.parallel.forked import Forked
@@ -40,7 +40,7 @@ class ConvertResult:
         out: dict[str, Any] = {
             "input": self.input,
             "mesh": mesh_section(self.mesh, c, self.manifold3d)
-            | {"float32_degenerate_triangles": self.float32_degenerate},
+            .with_extra(float32_degenerate_triangles=self.float32_degenerate).to_json(),
             "provenance": self.provenance,
             "notes": self.notes,
         }

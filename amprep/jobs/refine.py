@@ -17,6 +17,7 @@ from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh, face_chordal_errors, faces_section
 from amprep.geometry.measure.regularity import regularity
+from amprep.geometry.measure.report import Issue
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_file
 from amprep.geometry.placement.place import PlacedStl, place_user_stl, unmatched_issue
@@ -84,30 +85,30 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"{params.method.upper()} would output {size:,} triangles, over "
                           f"the limit of {params.max_triangles:,}: choose fewer faces, fewer iterations or a coarser input")
     curves = EdgeCurves(model) if placed is None else None  # a user's STL has no B-rep edges behind its vertices
-    worst = max((before[f]["chordal_error"] or {}).get("max", 0.0) for f in faces) if len(faces) else 0.0
+    worst = max((before[f].chordal_error.max if before[f].chordal_error else 0.0 for f in faces), default=0.0)
     target = params.target if params.target is not None else (0.1 * worst if worst > 0 else 1.0)
     prog("refining", 0.45)
     ref = refine_faces(params.method, mesh, faces, surfaces, params, params.iterations, curves, target)
     out = ref.mesh
     prog("scoring", 0.55)
     analysis = analyze_mesh(out, ap, surfaces, n_faces, info, None, prog.span(0.55, 0.6))
-    report = analysis.report
-    mesh_before, mesh_after = mesh_summary(mesh), report["mesh"]
-    mesh_after["file_size"] = STL_HEADER + STL_PER_TRIANGLE * out.n_triangles
-    issues = report["issues"] + topology_issues(mesh_before, mesh_after)
+    mesh_before = mesh_summary(mesh)
+    analysis.mesh_section = analysis.mesh_section.with_extra(file_size=STL_HEADER + STL_PER_TRIANGLE * out.n_triangles)
+    analysis.issues += topology_issues(mesh_before, analysis.mesh_section)
     if placed is not None and placed.unmatched:
-        issues.append(unmatched_issue(placed))
+        analysis.issues.append(unmatched_issue(placed))
     if not len(faces):
-        issues.append({"code": "nothing_to_refine", "severity": "info", "count": 0,
-                       "message": "no face exceeds the thresholds: the mesh is returned unchanged"})
+        analysis.issues.append(Issue("nothing_to_refine", "info", 0,
+                                     "no face exceeds the thresholds: the mesh is returned unchanged"))
     comparison = None
     if params.compare:
         prog("comparing with uniform tessellations", 0.6)
         comparison = compare(model, mesh, out, faces, surfaces, params, mesh_params, base_tol, curves, target)
-    report["params"] = refine_params_section(params, target)
-    report.update(method=params.method, mesh_before=mesh_before,
-                  refined_faces=refined_faces(faces, before, report["faces"], chosen, ref), comparison=comparison,
-                  issues=issues, provenance=provenance(mesh_params))
+    analysis.params = refine_params_section(params, target)
+    report = analysis.report
+    report.update(method=params.method, mesh_before=mesh_before.to_json(),
+                  refined_faces=refined_faces(faces, before, analysis.faces, chosen, ref), comparison=comparison,
+                  provenance=provenance(mesh_params))
     user_frame = out
     if placed is not None:
         report["alignment"] = placed.alignment()

@@ -14,6 +14,7 @@ import numpy as np  # noqa: E402
 
 from amprep.geometry.measure.cusp import BoxCusp  # noqa: E402
 from amprep.geometry.measure.regularity import BIN_EDGES, MEASURES  # noqa: E402
+from amprep.geometry.measure.report import FaceScore
 
 
 def cusp_per_slice(box: BoxCusp, approximate_mean: float, path: Path) -> Path:
@@ -40,13 +41,13 @@ def cusp_per_slice(box: BoxCusp, approximate_mean: float, path: Path) -> Path:
     return path
 
 
-def chordal_per_face(faces: list[dict[str, Any]], tolerance: float | None, path: Path) -> Path:
+def chordal_per_face(faces: list[FaceScore], tolerance: float | None, path: Path) -> Path:
     """Mean and max chordal error of every CAD face with a measured error, by face id."""
-    rows = [f for f in faces if f.get("chordal_error")]
+    rows = [(f.id, f.chordal_error) for f in faces if f.chordal_error is not None]
     fig, ax = plt.subplots(figsize=(max(6, min(20, len(rows) * 0.05 + 6)), 4.5), dpi=110)
-    ids = np.array([f["id"] for f in rows])
-    ax.bar(ids, [f["chordal_error"]["max"] for f in rows], width=0.9, color="tab:orange", label="max")
-    ax.bar(ids, [f["chordal_error"]["mean"] for f in rows], width=0.9, color="tab:blue", label="mean")
+    ids = np.array([i for i, _ in rows])
+    ax.bar(ids, [c.max for _, c in rows], width=0.9, color="tab:orange", label="max")
+    ax.bar(ids, [c.mean for _, c in rows], width=0.9, color="tab:blue", label="mean")
     if tolerance:
         ax.axhline(tolerance, c="black", ls="--", lw=1, label=f"tolerance {tolerance:g} mm")
     ax.set_xlabel("CAD face id")

@@ -3,7 +3,7 @@ and cylindricity against the exact surfaces when the faces are known)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -18,8 +18,17 @@ from amprep.geometry.measure import cusp
 from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error
 from amprep.geometry.measure.cylindricity import minimum_zone
 from amprep.geometry.measure.defects import boundary_loops, defect_locations, nonmanifold_vertices, self_intersections
-from amprep.geometry.measure.mesh_report import SCHEMA, mesh_issues, mesh_section
 from amprep.geometry.measure.regularity import MEASURES, regularity, summarize
+from amprep.geometry.measure.report import (
+    SCHEMA,
+    FaceScore,
+    Issue,
+    MeshSection,
+    Stats,
+    mesh_issues,
+    mesh_section,
+    stats_json,
+)
 
 
 @dataclass(frozen=True)
@@ -44,23 +53,34 @@ class AnalysisParams:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, "sample_order must be in 1..30")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(eq=False)
 class Analysis:
-    """The report (JSON-ready) and the per-triangle fields the viewer draws: chordal error (m,) (nan: unknown) and
-    approximate cusp height (m,), on `mesh`; `box` the bounding-box method's boxes."""
+    """A scored mesh: the report's typed sections, and the per-triangle fields the viewer draws: chordal error (m,)
+    (nan: unknown) and approximate cusp height (m,), on `mesh`; `box` the bounding-box method's boxes; `extra` the
+    report keys a job adds after the others (alignment, provenance)."""
 
-    report: dict[str, Any]
     mesh: Mesh
     chordal: np.ndarray
     cusp_height: np.ndarray
     box: cusp.BoxCusp | None
-    face_chordal: dict[int, np.ndarray] = field(default_factory=dict)
+    input: dict[str, Any]
+    mesh_section: MeshSection
+    faces: list[FaceScore]
+    chordal_error: Stats | None
+    regularity: dict[str, Any]
+    surface_types: dict[str, int]
+    cusp: dict[str, Any]
+    issues: list[Issue]
+    params: dict[str, Any]
+    extra: dict[str, Any] = field(default_factory=dict)
 
-
-def stats(x: np.ndarray) -> dict[str, float] | None:
-    """{mean, max} of the finite values of x, None when there are none."""
-    x = x[np.isfinite(x)]
-    return {"mean": float(x.mean()), "max": float(x.max())} if len(x) else None
+    @property
+    def report(self) -> dict[str, Any]:
+        """The JSON report (report.json; keys fixed, schemas/report.schema.json)."""
+        return {"schema": SCHEMA, "input": self.input, "mesh": self.mesh_section.to_json(),
+                "faces": [f.to_json() for f in self.faces], "chordal_error": stats_json(self.chordal_error),
+                "regularity": self.regularity, "surface_types": self.surface_types, "cusp_height": self.cusp,
+                "issues": [i.to_json() for i in self.issues], "params": self.params} | self.extra
 
 
 def face_chordal_errors(mesh: Mesh, surfaces: dict[int, Surface], order: int) -> np.ndarray:
@@ -91,7 +111,7 @@ def _cylinder_cloud(corners: np.ndarray) -> np.ndarray:
 
 
 def faces_section(mesh: Mesh, chordal: np.ndarray, surfaces: dict[int, Surface], params: AnalysisParams,
-                  quality: dict[str, np.ndarray], n_faces: int) -> list[dict[str, Any]]:
+                  quality: dict[str, np.ndarray], n_faces: int) -> list[FaceScore]:
     """faces[]: per CAD face id, surface type, triangles, chordal error {mean, max}, profile error = 2·max|d|,
     approximate cusp height {mean, max}, cylindricity (cylinders), regularity means."""
     b = np.asarray(params.build_dir, float)
@@ -104,21 +124,17 @@ def faces_section(mesh: Mesh, chordal: np.ndarray, surfaces: dict[int, Surface],
     for fid in range(n_faces):
         tris = order[bounds[fid]:bounds[fid + 1]]
         stype = mesh.faces[fid].surface_type if fid < len(mesh.faces) else "none"
-        entry: dict[str, Any] = {"id": fid, "surface_type": stype, "triangles": int(len(tris))}
-        ch = stats(chordal[tris]) if len(tris) else None
-        entry["chordal_error"] = ch
-        entry["profile_error"] = 2 * ch["max"] if ch else None
         w = (area[tris] * counted[tris])
-        entry["cusp_height"] = ({"mean": float((c_tri[tris] * w).sum() / w.sum()), "max": float(c_tri[tris][counted[tris]].max())}
-                                if len(tris) and w.sum() > 0 else {"mean": 0.0, "max": 0.0} if len(tris) else None)
-        entry["cylindricity"] = None
+        cusp_height = (Stats(float((c_tri[tris] * w).sum() / w.sum()), float(c_tri[tris][counted[tris]].max()))
+                       if len(tris) and w.sum() > 0 else Stats(0.0, 0.0) if len(tris) else None)
+        cylindricity = None
         surf = surfaces.get(fid)
         if stype == "cylinder" and len(tris) and surf is not None and surf.data:
             pts = _cylinder_cloud(corners[tris])
             if len(pts) >= 6:
-                entry["cylindricity"] = minimum_zone(pts, surf.data["origin"], surf.data["axis"]).as_dict()
-        entry["regularity"] = {k: float(quality[k][tris].mean()) for k in MEASURES} if len(tris) else None
-        out.append(entry)
+                cylindricity = minimum_zone(pts, surf.data["origin"], surf.data["axis"]).as_dict()
+        out.append(FaceScore(fid, stype, int(len(tris)), Stats.of(chordal[tris]) if len(tris) else None, cusp_height,
+                             cylindricity, {k: float(quality[k][tris].mean()) for k in MEASURES} if len(tris) else None))
     return out
 
 
@@ -139,8 +155,7 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     nmv = nonmanifold_vertices(mesh, inc)
     prog("self-intersections", 0.15)
     n_si, si_examples = self_intersections(mesh, params.intersection_examples)
-    section = mesh_section(mesh, checks, ok3d)
-    section.update({
+    section = replace(mesh_section(mesh, checks, ok3d), defects={
         "boundary_loops": {"count": len(loops), "total_length": float(sum(loops)), "lengths": loops[:100]},
         "nonmanifold_vertices": int(len(nmv)),
         "self_intersections": {"count": n_si, "examples": si_examples.tolist()},
@@ -158,41 +173,27 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     has_cad = surfaces is not None
     faces = faces_section(mesh, chordal, surfaces or {}, params, q, n_faces) if has_cad else []
     types: dict[str, int] = {}
-    if has_cad:
-        for f in faces:
-            types[f["surface_type"]] = types.get(f["surface_type"], 0) + f["triangles"]
-    unmeshed = [f["id"] for f in faces if f["triangles"] == 0]
-    issues = mesh_issues(checks, ok3d, len(unmeshed))
-    if unmeshed:
-        issues[-1 if issues and issues[-1]["code"] == "unmeshed_faces" else 0]["face_ids"] = unmeshed[:1000]
+    for f in faces:
+        types[f.surface_type] = types.get(f.surface_type, 0) + f.triangles
+    issues = mesh_issues(checks, ok3d, tuple(f.id for f in faces if f.triangles == 0))
     if n_si:
-        issues.append({"code": "self_intersections", "severity": "error", "count": n_si,
-                       "message": "pairs of triangles that cross each other"})
+        issues.append(Issue("self_intersections", "error", n_si, "pairs of triangles that cross each other"))
     if len(nmv):
-        issues.append({"code": "nonmanifold_vertices", "severity": "error", "count": int(len(nmv)),
-                       "message": "vertices where separate fans of triangles touch (bow-ties)"})
+        issues.append(Issue("nonmanifold_vertices", "error", int(len(nmv)),
+                            "vertices where separate fans of triangles touch (bow-ties)"))
     if not has_cad:
-        issues.append({"code": "chordal_error_unavailable", "severity": "info", "count": 1,
-                       "message": "no CAD model: the distance to the design surface cannot be measured"})
+        issues.append(Issue("chordal_error_unavailable", "info", 1,
+                            "no CAD model: the distance to the design surface cannot be measured"))
     elif tolerance is not None:
-        over = [f["id"] for f in faces if f["chordal_error"] and f["chordal_error"]["max"] > tolerance * (1 + 1e-9)]
+        over = [f.id for f in faces if f.chordal_error and f.chordal_error.max > tolerance * (1 + 1e-9)]
         if over:
-            issues.append({"code": "chordal_error_over_tolerance", "severity": "warning", "count": len(over),
-                           "message": f"faces whose chordal error exceeds {tolerance:g} mm", "face_ids": over[:1000]})
-    report: dict[str, Any] = {
-        "schema": SCHEMA,
-        "input": input_info or {},
-        "mesh": section,
-        "faces": faces,
-        "chordal_error": stats(chordal) if has_cad else None,
-        "regularity": summary.as_dict(),
-        "surface_types": types,
-        "cusp_height": {"layer": params.layer, "build_direction": [float(x) for x in b],
-                        "approximate": cusp.approximate_summary(mesh.corners, params.layer, b),
-                        "bounding_box": box.summary() if box is not None else None},
-        "issues": issues,
-        "params": {"layer": params.layer, "build_dir": list(params.build_dir), "sample_order": params.sample_order,
-                   "cloud_density": box.density if box is not None else params.cloud_density},
-    }
+            issues.append(Issue("chordal_error_over_tolerance", "warning", len(over),
+                                f"faces whose chordal error exceeds {tolerance:g} mm", tuple(over[:1000])))
+    cusp_section = {"layer": params.layer, "build_direction": [float(x) for x in b],
+                    "approximate": cusp.approximate_summary(mesh.corners, params.layer, b),
+                    "bounding_box": box.summary() if box is not None else None}
+    used = {"layer": params.layer, "build_dir": list(params.build_dir), "sample_order": params.sample_order,
+            "cloud_density": box.density if box is not None else params.cloud_density}
     prog("done", 1.0)
-    return Analysis(report, mesh, chordal, np.where(counted, c_tri, 0.0), box)
+    return Analysis(mesh, chordal, np.where(counted, c_tri, 0.0), box, input_info or {}, section, faces,
+                    Stats.of(chordal) if has_cad else None, summary.as_dict(), types, cusp_section, issues, used)

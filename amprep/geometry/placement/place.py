@@ -13,6 +13,7 @@ from amprep.geometry.cad.surfaces import Surface, surface_of
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress
 from amprep.geometry.measure import cusp
+from amprep.geometry.measure.report import Issue
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 
@@ -81,8 +82,7 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
     return PlacedStl(scored, fit, tol, surfaces, reference.mesh.faces)
 
 
-def unmatched_issue(placed: PlacedStl) -> dict[str, Any]:
-    """The issue entry for STL triangles that match no CAD face."""
-    return {"code": "unmatched_triangles", "severity": "warning", "count": placed.unmatched,
-            "message": f"STL triangles with a corner farther than {placed.tolerance:.3g} mm from every CAD "
-            "face: the STL differs from the CAD there (not scored)"}
+def unmatched_issue(placed: PlacedStl) -> Issue:
+    """The issue for STL triangles that match no CAD face."""
+    return Issue("unmatched_triangles", "warning", placed.unmatched, f"STL triangles with a corner farther than "
+                 f"{placed.tolerance:.3g} mm from every CAD face: the STL differs from the CAD there (not scored)")

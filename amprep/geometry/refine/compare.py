@@ -15,8 +15,8 @@ from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.measure import cusp
-from amprep.geometry.measure.analysis import AnalysisParams, face_chordal_errors, stats
-from amprep.geometry.measure.mesh_report import mesh_section
+from amprep.geometry.measure.analysis import AnalysisParams, face_chordal_errors
+from amprep.geometry.measure.report import FaceScore, Issue, MeshSection, Stats, mesh_section, stats_json
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 from amprep.geometry.refine.adaptive import adaptive_refine
@@ -68,39 +68,37 @@ class RefineParams:
         AnalysisParams(self.layer, self.build_dir, self.sample_order).validate()
 
 
-def select_faces(faces_before: list[dict[str, Any]], params: RefineParams, n_faces: int) -> dict[int, str]:
+def select_faces(faces_before: list[FaceScore], params: RefineParams, n_faces: int) -> dict[int, str]:
     """face id → why it is refined."""
     if params.faces is not None:
         bad = [f for f in params.faces if not 0 <= f < n_faces]
         if bad:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, f"no face {bad[0]}: the part has faces 0..{n_faces - 1}")
         return {int(f): "named" for f in params.faces}
-    thresholds = [(params.max_chordal, "chordal_error", "mean chordal error"),
-                  (params.max_cusp, "cusp_height", "mean cusp height")]
-    any_threshold = any(t is not None for t, _, _ in thresholds) or params.max_cylindricity is not None
+    any_threshold = any(t is not None for t in (params.max_chordal, params.max_cusp, params.max_cylindricity))
     out: dict[int, str] = {}
     for f in faces_before:
-        if f["surface_type"] in ("plane", "none") or not f["triangles"]:
+        if f.surface_type in ("plane", "none") or not f.triangles:
             continue
         reasons = []
-        for limit, key, label in thresholds:
-            value = (f.get(key) or {}).get("mean")
-            if limit is not None and value is not None and value > limit:
-                reasons.append(f"{label} {value:.4g} > {limit:g} mm")
-        cyl = f.get("cylindricity")
+        for limit, value, label in ((params.max_chordal, f.chordal_error, "mean chordal error"),
+                                    (params.max_cusp, f.cusp_height, "mean cusp height")):
+            if limit is not None and value is not None and value.mean > limit:
+                reasons.append(f"{label} {value.mean:.4g} > {limit:g} mm")
+        cyl = f.cylindricity
         if params.max_cylindricity is not None and cyl and cyl["zone"] > params.max_cylindricity:
             reasons.append(f"cylindricity {cyl['zone']:.4g} > {params.max_cylindricity:g} mm")
         if reasons:
-            out[f["id"]] = "; ".join(reasons)
+            out[f.id] = "; ".join(reasons)
         elif not any_threshold:
-            out[f["id"]] = "curved face (no threshold given: every curved face)"
+            out[f.id] = "curved face (no threshold given: every curved face)"
     return out
 
 
-def mesh_summary(mesh: Mesh) -> dict[str, Any]:
-    """The report's `mesh` keys (report.mesh_section) of the input mesh, and its binary STL size."""
+def mesh_summary(mesh: Mesh) -> MeshSection:
+    """The report's `mesh` section of the input mesh, with its binary STL size."""
     section = mesh_section(mesh, check_mesh(mesh), manifold3d_accepts(mesh))
-    return section | {"file_size": STL_HEADER + STL_PER_TRIANGLE * mesh.n_triangles}
+    return section.with_extra(file_size=STL_HEADER + STL_PER_TRIANGLE * mesh.n_triangles)
 
 
 def score_mesh(mesh: Mesh, surfaces: dict[int, Surface], faces: np.ndarray, params: RefineParams,
@@ -118,10 +116,10 @@ def score_mesh(mesh: Mesh, surfaces: dict[int, Surface], faces: np.ndarray, para
         w = area * counted * sel
         return float((c * w).sum() / w.sum()) if w.sum() > 0 else None
 
-    chordal = stats(ch[on])
+    chordal = Stats.of(ch[on])
     row = {"triangles": mesh.n_triangles, "file_size": STL_HEADER + STL_PER_TRIANGLE * mesh.n_triangles,
-           "chordal_error": chordal, "profile_error": 2 * chordal["max"] if chordal else None,
-           "cusp_height": cusp_mean(on), "part_chordal_error": stats(ch),
+           "chordal_error": stats_json(chordal), "profile_error": 2 * chordal.max if chordal else None,
+           "cusp_height": cusp_mean(on), "part_chordal_error": stats_json(Stats.of(ch)),
            "part_cusp_height": cusp_mean(np.ones(len(on), bool))}
     if box:
         row["part_cusp_height_box"] = cusp.bounding_box(corners, params.layer, b).summary()["mean"]
@@ -175,28 +173,29 @@ def uniform_curve(model: CadModel, start: float, target_triangles: int, surfaces
     return rows
 
 
-def topology_issues(mesh_before: dict[str, Any], mesh_after: dict[str, Any]) -> list[dict[str, Any]]:
+def topology_issues(mesh_before: MeshSection, mesh_after: MeshSection) -> list[Issue]:
     """topology_changed when the refined mesh's boundary or non-manifold edge counts differ from the input's."""
-    key = ("boundary_edges", "nonmanifold_edges")
-    if tuple(mesh_before[k] for k in key) == tuple(mesh_after[k] for k in key):
+    b, a = mesh_before.checks, mesh_after.checks
+    if (b.boundary_edges, b.nonmanifold_edges) == (a.boundary_edges, a.nonmanifold_edges):
         return []
-    return [{"code": "topology_changed", "severity": "error", "count": 1,
-             "message": "the refined mesh's boundary or non-manifold edges differ from the input's"}]
+    return [Issue("topology_changed", "error", 1, "the refined mesh's boundary or non-manifold edges differ from the "
+                  "input's")]
 
 
-def refined_faces(faces: np.ndarray, before: list[dict[str, Any]], after: list[dict[str, Any]], chosen: dict[int, str],
+def refined_faces(faces: np.ndarray, before: list[FaceScore], after: list[FaceScore], chosen: dict[int, str],
                   ref: Refinement) -> list[dict[str, Any]]:
     """refined_faces[]: per refined face, why, triangles, SMA categories and the errors before and after."""
     out = []
     for f in faces:
         b, a = before[f], after[f]
         cats = ref.categories.get(int(f))
-        out.append({"id": int(f), "surface_type": b["surface_type"], "reason": chosen[int(f)],
-                    "triangles_before": b["triangles"], "triangles_after": a["triangles"],
+        out.append({"id": int(f), "surface_type": b.surface_type, "reason": chosen[int(f)],
+                    "triangles_before": b.triangles, "triangles_after": a.triangles,
                     "categories": {str(k): n for k, n in enumerate(cats)} if cats is not None else None,
-                    "chordal_error_before": b["chordal_error"], "chordal_error_after": a["chordal_error"],
-                    "cusp_height_before": b["cusp_height"], "cusp_height_after": a["cusp_height"],
-                    "cylindricity_before": b["cylindricity"], "cylindricity_after": a["cylindricity"]})
+                    "chordal_error_before": stats_json(b.chordal_error),
+                    "chordal_error_after": stats_json(a.chordal_error),
+                    "cusp_height_before": stats_json(b.cusp_height), "cusp_height_after": stats_json(a.cusp_height),
+                    "cylindricity_before": b.cylindricity, "cylindricity_after": a.cylindricity})
     return out
 
 
