@@ -30,6 +30,7 @@ class ErrorCode(StrEnum):
     NOT_ACCEPTABLE = "not_acceptable"
     CONFLICT = "conflict"
     UNAVAILABLE = "unavailable"
+    CALLBACK_REFUSED = "callback_refused"
 
 
 class AmprepError(Exception):

@@ -86,7 +86,7 @@ def start_redis(data: Path, binary: str | None = None) -> tuple[subprocess.Popen
 
 def worker_commands(workers: int) -> dict[str, list[str]]:
     """The Celery workers of one machine: quick (convert/analyze), heavy (refine) and callbacks."""
-    base = [sys.executable, "-m", "celery", "-A", "workers.celery_app", "worker", "--without-gossip",
+    base = [sys.executable, "-P", "-m", "celery", "-A", "workers.celery_app", "worker", "--without-gossip",
             "--without-mingle", "-O", "fair", "--loglevel", "INFO"]
     return {
         "worker-quick": base + ["-Q", "quick", "-c", str(workers), "-n", "quick@%h"],
@@ -100,13 +100,14 @@ class Supervisor:
     """Starts named child processes, restarts the ones that die, and stops them all in reverse order."""
 
     env: dict[str, str]
+    cwd: Path | None = None  # the children's working directory (Celery puts its own on sys.path)
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)  # type: ignore[type-arg]
     commands: dict[str, list[str]] = field(default_factory=dict)
     restarts: dict[str, float] = field(default_factory=dict)
 
     def start(self, name: str, cmd: list[str]) -> None:
         self.commands[name] = cmd
-        self.procs[name] = subprocess.Popen(cmd, env=self.env, start_new_session=True)
+        self.procs[name] = subprocess.Popen(cmd, env=self.env, cwd=self.cwd, start_new_session=True)
 
     def watch(self) -> None:
         for name, proc in list(self.procs.items()):
@@ -161,7 +162,7 @@ def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None 
         redis_proc, redis_url = start_redis(data, exe)
         origin = f"private redis-server from {origin}"
     env = dict(os.environ, AMPREP_REDIS_URL=redis_url, AMPREP_DATA_DIR=str(data), PYTHONUNBUFFERED="1")
-    sup = Supervisor(env)
+    sup = Supervisor(env, cwd=data)  # not the caller's folder: one holding a folder named amprep would shadow us
     stopping = []
 
     def _stop(signum: int, _frame: object) -> None:
@@ -171,7 +172,7 @@ def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None 
     try:
         for name, cmd in (worker_commands(workers) if run_workers else {}).items():
             sup.start(name, cmd)
-        sup.start("api", [sys.executable, "-m", "uvicorn", "app.main:app", "--host", host, "--port", str(port),
+        sup.start("api", [sys.executable, "-P", "-m", "uvicorn", "app.main:app", "--host", host, "--port", str(port),
                           "--no-access-log", "--log-level", "warning", "--timeout-graceful-shutdown", "5"])
         base = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
         if wait_http(base + "/healthz"):

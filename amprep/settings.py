@@ -36,6 +36,9 @@ class Settings(BaseSettings):
         default_factory=list, description="sha256 hex digests of the accepted API keys (comma separated)")
     callback_secret: str = Field("", description="HMAC-SHA256 key for callback signatures")
     callback_retries: int = Field(5, ge=0)
+    callback_allow: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, description="Addresses or networks (comma separated, e.g. 10.0.0.0/8) callbacks may "
+        "reach although loopback, private, link-local or reserved; none by default")
     soft_time_limit_quick: int = Field(600, gt=0, description="Seconds before a convert/analyze job is told to stop")
     hard_time_limit_quick: int = Field(660, gt=0)
     soft_time_limit_heavy: int = Field(3600, gt=0, description="Seconds before a refine job is told to stop")
@@ -49,6 +52,25 @@ class Settings(BaseSettings):
     def _split_keys(cls, value: object) -> object:
         if isinstance(value, str):
             return [k.strip().lower() for k in value.split(",") if k.strip()]
+        return value
+
+    @field_validator("callback_allow", mode="before")
+    @classmethod
+    def _split_networks(cls, value: object) -> object:
+        if isinstance(value, str):
+            return [n.strip() for n in value.split(",") if n.strip()]
+        return value
+
+    @field_validator("callback_allow")
+    @classmethod
+    def _networks(cls, value: list[str]) -> list[str]:
+        from amprep.callbacks import networks
+        from amprep.errors import AmprepError
+
+        try:
+            networks(value)  # an entry that is no address or network stops the start-up, with its reason
+        except AmprepError as exc:
+            raise ValueError(exc.message) from None
         return value
 
     @field_validator("api_keys")

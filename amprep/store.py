@@ -228,6 +228,10 @@ class JobStore:
         pipe.execute()
         shutil.rmtree(self.job_dir(job.id), ignore_errors=True)
 
+    def discard_files(self, job_id: str) -> None:
+        """Remove the files stored for a job that was never created (a refused or repeated request)."""
+        shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+
     # -- idempotency and reuse ------------------------------------------------------------------------------
     def claim_idempotency(self, owner: str, key: str, job_id: str) -> str | None:
         """Bind `key` to `job_id` unless already bound: None if claimed, else the job id it names."""

@@ -8,9 +8,10 @@ from celery import Celery
 from fastapi import Depends, Header, Request
 
 from amprep.errors import ErrorCode
-from amprep.settings import Settings, hash_key
+from amprep.settings import Settings
 from amprep.store import ANONYMOUS, JobStore
 
+from .auth import valid_key
 from .problems import ApiError
 
 
@@ -32,11 +33,8 @@ def get_owner(request: Request, authorization: Annotated[str | None, Header(
     keys: frozenset[str] = request.app.state.key_hashes
     if not keys:
         return ANONYMOUS
-    scheme, _, key = (authorization or "").partition(" ")
-    if scheme.lower() != "bearer" or not key.strip():
-        raise ApiError(401, ErrorCode.UNAUTHORIZED, "this server needs an API key: Authorization: Bearer KEY")
-    digest = hash_key(key.strip())
-    if digest not in keys:
+    digest = valid_key(authorization, keys)  # auth.KeyGuard refused the request already when it is None
+    if digest is None:
         raise ApiError(401, ErrorCode.UNAUTHORIZED, "the API key is not valid")
     return digest
 

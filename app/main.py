@@ -17,6 +17,7 @@ from amprep.settings import Settings, get_settings
 from amprep.store import JobStore
 
 from . import problems
+from .auth import KeyGuard
 from .limits import UploadLimit
 from .metrics import StoreCollector
 from .routes import health, jobs
@@ -102,6 +103,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(jobs.router)
     app.add_middleware(UploadLimit, limit=s.max_upload_bytes)
+    app.add_middleware(KeyGuard, keys=frozenset(s.api_keys), allow_insecure=s.allow_insecure_bind)
     app.add_middleware(AccessLog)
     return app
 

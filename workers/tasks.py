@@ -15,6 +15,7 @@ import httpx
 from celery import Task
 from celery.exceptions import SoftTimeLimitExceeded, TimeLimitExceeded
 
+from amprep import callbacks
 from amprep.errors import AmprepError, ErrorCode
 from amprep.jobs.common import provenance
 from amprep.jobs.params import KINDS, JobKind
@@ -139,7 +140,9 @@ def signature(secret: str, body: bytes) -> str:
 
 @app.task(name=CALLBACK_TASK, bind=True, acks_late=True, max_retries=None)
 def callback(self: Task, job_id: str) -> None:
-    """POST the final job JSON to params.callback_url; retried with exponential backoff on failure."""
+    """POST the final job JSON to params.callback_url, at an address checked as it connects (amprep.callbacks: never
+    loopback, private or link-local unless AMPREP_CALLBACK_ALLOW says), no redirect followed; retried with
+    exponential backoff on failure."""
     settings = get_settings()
     job = store().get(job_id)
     if job is None or not job.params.get("callback_url"):
@@ -149,9 +152,12 @@ def callback(self: Task, job_id: str) -> None:
     headers = {"Content-Type": "application/json", "X-Amprep-Job": job_id,
                "X-Amprep-Signature": signature(settings.callback_secret, body)}
     try:
-        r = httpx.post(job.params["callback_url"], content=body, headers=headers, timeout=10)
+        r = callbacks.post(job.params["callback_url"], body, headers, callbacks.networks(settings.callback_allow))
         r.raise_for_status()
         log.info("callback delivered", extra={"code": r.status_code})
+    except AmprepError as exc:  # the host now resolves to an address callbacks must not reach: never sent
+        log.error("callback refused: %s", exc.message)
+        return
     except httpx.HTTPError as exc:
         if self.request.retries >= settings.callback_retries:
             log.error("callback given up after %d tries: %s", self.request.retries + 1, exc)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.limits import MIN_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -81,9 +82,9 @@ class JobKind:
 
 def _meshing(tolerance: float, help_tolerance: str) -> tuple[Param, ...]:
     return (
-        Param("tolerance", "float", tolerance, help_tolerance, "mm", gt=0, le=100),
-        Param("relative", "float", None, "Tolerance as a fraction of the bounding-box diagonal (replaces tolerance)",
-              gt=0, lt=1, optional=True),
+        Param("tolerance", "float", tolerance, help_tolerance, "mm", ge=MIN_TOLERANCE, le=100),
+        Param("relative", "float", None, "Tolerance as a fraction of the bounding-box diagonal (replaces tolerance; "
+              f"the result must be at least {MIN_TOLERANCE:g} mm)", ge=1e-6, lt=1, optional=True),
         Param("angular", "float", 0.5, "Largest angle one segment of a curved edge turns through", "rad", gt=0, le=1.57),
         Param("min_size", "float", 0.0, "Smallest triangle edge (0: tolerance/10)", "mm", ge=0, le=100),
         Param("algorithm", "choice", "delabella", "OCCT mesh algorithm", choices=("delabella", "watson")),

@@ -11,11 +11,13 @@ import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.edge_curves import EdgeCurves
-from amprep.geometry.cad.read import read_cad
+from amprep.geometry.cad.read import CadModel, read_cad
 from amprep.geometry.cad.surfaces import Surface, surface_of
+from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh, face_chordal_errors, faces_section
+from amprep.geometry.measure.chordal import worth_compiling
 from amprep.geometry.measure.regularity import regularity
 from amprep.geometry.measure.report import Issue
 from amprep.geometry.meshing.params import MeshParams
@@ -74,6 +76,14 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
         mesh, base_tol = res.mesh, res.tolerance
         surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
         info.update(model_info(model), source="tessellation", tolerance=res.tolerance)
+    with compiled(worth_compiling(mesh.n_triangles, params.sample_order)):  # decided by the mesh, not by timing
+        return _refine_and_report(model, mesh, surfaces, placed, info, base_tol, mesh_params, params, prog)
+
+
+def _refine_and_report(model: CadModel, mesh: Mesh, surfaces: dict[int, Surface], placed: PlacedStl | None,
+                       info: dict[str, Any], base_tol: float, mesh_params: MeshParams, params: RefineParams,
+                       prog: Progress) -> RefineResult:
+    """refine_file's work once the mesh to refine and its faces' surfaces are known."""
     n_faces = len(model.faces)
     ap = AnalysisParams(params.layer, params.build_dir, params.sample_order, bounding_box=False)
     before = faces_section(mesh, face_chordal_errors(mesh, surfaces, params.sample_order), surfaces, ap,

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, Header, Query, Request, UploadFile
 from fastapi.responses import FileResponse, JSONResponse, Response
 from pydantic import ValidationError
 from sse_starlette.sse import EventSourceResponse
+from starlette.concurrency import run_in_threadpool
 
+from amprep import callbacks
 from amprep.errors import AmprepError, ErrorCode
 from amprep.jobs.params import check
 from amprep.queue import CALLBACK_TASK, TASK_OF_KIND
@@ -32,17 +35,24 @@ PROBLEMS: dict[int | str, dict[str, Any]] = {
 JOB_EXAMPLE = JobPublic.model_config["json_schema_extra"]["examples"][0]  # type: ignore[index]
 
 
+#: mesh media types a client may ask for in Accept to get an ended job's mesh itself
+MESH_TYPES = ("model/stl", "model/3mf")
+
+
 def _job_response(job: Job, request: Request, status_code: int | None = None) -> Response:
-    """The job JSON (200 when it has ended, else 202); or its STL when asked with Accept: model/stl."""
-    if "model/stl" in request.headers.get("accept", "") and job.status in TERMINAL:
+    """The job JSON (200 when it has ended, else 202); or its mesh when asked with Accept: model/stl or model/3mf."""
+    accept = request.headers.get("accept", "")
+    wanted = [m for m in MESH_TYPES if m in accept]
+    if wanted and job.status in TERMINAL:
         if job.status != "succeeded":
             err = job.error or {"code": ErrorCode.CANCELLED.value, "message": "the job was cancelled"}
             return problem(422, err["code"], err["message"], request.url.path, job_id=job.id)
-        stl = next((a for a in job.artifacts if a["media_type"] == "model/stl"), None)
-        if stl is None:
-            return problem(406, ErrorCode.NOT_ACCEPTABLE.value, "this job has no STL artifact", request.url.path, job_id=job.id)
-        return FileResponse(request.app.state.store.artifact_path(job.id, stl["name"]), media_type="model/stl",
-                            filename=stl["name"], headers={"X-Amprep-Job": job.id})
+        art = next((a for m in wanted for a in job.artifacts if a["media_type"] == m), None)
+        if art is None:
+            return problem(406, ErrorCode.NOT_ACCEPTABLE.value, f"this job has no {' or '.join(wanted)} artifact "
+                           "(ask a convert job for the format its params chose)", request.url.path, job_id=job.id)
+        return FileResponse(request.app.state.store.artifact_path(job.id, art["name"]), media_type=art["media_type"],
+                            filename=art["name"], headers={"X-Amprep-Job": job.id})
     code = status_code or (200 if job.status in TERMINAL else 202)
     return JSONResponse(job.public(), status_code=code, headers={"Location": f"/v1/jobs/{job.id}"})
 
@@ -59,6 +69,8 @@ def _params(kind: str, raw: str) -> dict[str, Any]:
         data = json.loads(raw or "{}")
     except json.JSONDecodeError as exc:
         raise ApiError(422, ErrorCode.INVALID_REQUEST, f"params: not JSON ({exc.msg})") from None
+    except RecursionError:
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, "params: nested too deeply") from None
     if not isinstance(data, dict):
         raise ApiError(422, ErrorCode.INVALID_REQUEST, "params: must be a JSON object")
     try:
@@ -72,6 +84,27 @@ def _params(kind: str, raw: str) -> dict[str, Any]:
         first = errors[0]
         raise ApiError(422, ErrorCode.INVALID_REQUEST, f"{'.'.join(map(str, first['loc']))}: {first['msg']}",
                        errors=errors) from None
+
+
+#: the multipart fields of POST /v1/jobs; any other is refused, never ignored
+FORM_FIELDS = frozenset({"file", "stl", "kind", "params"})
+
+
+async def _no_other_fields(request: Request) -> None:
+    """invalid_request for a form field the API does not take (a param sent as `-F tolerance=0.05` would otherwise
+    be silently ignored and the job run at the default)."""
+    extra = sorted(set((await request.form()).keys()) - FORM_FIELDS)
+    if extra:
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, f"unknown form field '{extra[0]}': the fields are file, stl, "
+                       "kind and params (job parameters go in the params JSON, e.g. -F 'params={\"tolerance\": 0.05}')")
+
+
+async def _callback_allowed(url: str, allow: list[str]) -> None:
+    """callback_refused (422) for a callback_url that resolves to an address callbacks must not reach."""
+    try:
+        await run_in_threadpool(callbacks.resolve, url, callbacks.networks(allow))
+    except AmprepError as exc:
+        raise ApiError(422, exc.code, exc.message) from None
 
 
 @router.post(
@@ -95,27 +128,31 @@ async def create_job(
     idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", max_length=255,
                                                   description="The same key returns the same job")] = None,
 ) -> Response:
+    await _no_other_fields(request)
     p = _params(kind, params)
+    if p.get("callback_url"):
+        await _callback_allowed(p["callback_url"], request.app.state.settings.callback_allow)
     info = {"file": await sniff(file, "file")}
     if stl is not None:
         info["stl"] = await sniff(stl, "stl")
         require_stl(info["stl"])
         require_cad(info["file"])
     job_id = new_job_id()
-    if idempotency_key:
-        request_fp = fingerprint(kind, f"{info['file']['name']}:{info['file']['size']}", "", p)
-        earlier = store.claim_idempotency(owner, idempotency_key, job_id)
-        if earlier and (old := store.get(earlier)) is not None:
-            if old.input.get("request") != request_fp:
-                raise ApiError(409, ErrorCode.CONFLICT, "Idempotency-Key already used for a different request")
-            request.state.job_id = old.id
-            return await _respond(request, store, old, wait, owner)
-        info["request"] = request_fp
+    earlier = store.claim_idempotency(owner, idempotency_key, job_id) if idempotency_key else None
     job_dir = store.job_dir(job_id) / "input"
     info["file"] = await store_upload(file, info["file"], job_dir, "model")
     if stl is not None:
         info["stl"] = await store_upload(stl, info["stl"], job_dir, "user")
     info["fingerprint"] = fingerprint(kind, info["file"]["sha256"], info.get("stl", {}).get("sha256", ""), p)
+    if idempotency_key:  # the same key: the same bytes and params, or a conflict
+        info["request"] = fingerprint(kind, f"{info['file']['sha256']}:{info['file']['name']}",
+                                      info.get("stl", {}).get("sha256", ""), p)
+        if earlier and (old := store.get(earlier)) is not None:
+            store.discard_files(job_id)
+            if old.input.get("request") != info["request"]:
+                raise ApiError(409, ErrorCode.CONFLICT, "Idempotency-Key already used for a different request")
+            request.state.job_id = old.id
+            return await _respond(request, store, old, wait, owner)
     job = Job(id=job_id, kind=kind, owner=owner, params=p, input=info, idempotency_key=idempotency_key)
     request.state.job_id = job_id
     earlier_result = store.reusable(info["fingerprint"], owner) if p["reuse"] else None
@@ -157,9 +194,12 @@ def _cursor_decode(cursor: str | None) -> float | None:
     if not cursor:
         return None
     try:
-        return float(base64.urlsafe_b64decode(cursor.encode()).decode())
+        value = float(base64.urlsafe_b64decode(cursor.encode()).decode())
     except Exception:
-        raise ApiError(422, ErrorCode.INVALID_REQUEST, "cursor: not a cursor this server gave") from None
+        value = math.nan
+    if not math.isfinite(value):
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, "cursor: not a cursor this server gave")
+    return value
 
 
 @router.get("/jobs", operation_id="list_jobs", response_model=JobList, summary="Your jobs, newest first",

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from amprep.geometry.cad.surfaces import cylinder, plane
+from amprep.geometry.core.compiled import compiled
 from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error
 
 
@@ -56,13 +57,15 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
     models = ([model_from_shape(s) for s in reference_solids.values()] if source == "reference"
               else [read_cad(corpus(source))])
     w = barycentric_grid(6)
-    chordal.load_kernels()  # loaded: every call of any size takes the compiled path
+    chordal.load_kernels()
     kinds = set()
     for model in models:
         mesh = mesh_model(model, MeshParams(tolerance=0.2)).mesh
         for surf, corners, uv in _faces_of(model, mesh):
-            fast = chordal._compiled(surf, corners, uv, w)
-            slow = triangle_chordal_error(corners, uv, surf.evaluate, 6)
+            with compiled(True):  # every call of any size takes the compiled path
+                fast = chordal._compiled(surf, corners, uv, w)
+            with compiled(False):
+                slow = triangle_chordal_error(corners, uv, surf.evaluate, 6)
             if surf.surface_type in ("plane", "cylinder", "cone", "sphere", "torus", "bspline"):
                 assert fast is not None
                 kinds.add(surf.surface_type)
@@ -71,24 +74,13 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
                      else {"plane", "cylinder", "bspline"})
 
 
-def test_many_small_numpy_evaluations_add_up_to_loading_the_kernels(monkeypatch):
-    """Refinement evaluates in many small calls; once their numpy work passes NUMPY_BUDGET the compiled kernels are
-    loaded (each call alone stays under COMPILED_MIN_POINTS, so a per-call rule never would)."""
-    from amprep.geometry.cad import bspline
-
-    monkeypatch.setattr(bspline, "_numpy_work", 0)
-    monkeypatch.setattr(bspline, "NUMPY_BUDGET", 10)
-    assert bspline.spend_numpy(4) and bspline.spend_numpy(5)
-    assert not bspline.spend_numpy(1) and not bspline.spend_numpy(1)
-
-
 @pytest.mark.parametrize("name, tol", [("nist_ctc02_ap242.stp", 0.1), ("nist_ctc02_bspline_ap203.stp", 0.05)])
 def test_a_stop_value_bounds_only_triangles_over_it_and_serial_kernels_equal_parallel(name, tol):
     """Every curved face of a real part, measured in one call (the parallel kernels, over BLOCK triangles) and in
     calls of a few triangles (the serial kernels): the same values, bit for bit. With a stop at the median, values
     at or under it are exact, values over it are over it and at most the true ones, and exact_over restores them."""
     from amprep.geometry.cad.read import read_cad
-    from amprep.geometry.measure import _chordal_kernel, chordal
+    from amprep.geometry.measure import chordal
     from amprep.geometry.meshing.params import MeshParams
     from amprep.geometry.meshing.pipeline import mesh_model
     from tests.conftest import corpus
@@ -100,16 +92,26 @@ def test_a_stop_value_bounds_only_triangles_over_it_and_serial_kernels_equal_par
     for surf, corners, uv in _faces_of(model, mesh):
         if surf.surface_type not in ("cylinder", "cone", "sphere", "torus", "bspline") or len(corners) < 8:
             continue
-        full = triangle_chordal_error(corners, uv, surf)
-        pieces = np.concatenate([triangle_chordal_error(corners[s:s + 7], uv[s:s + 7], surf)
-                                 for s in range(0, len(corners), 7)])
-        assert np.array_equal(full, pieces)
-        stop = float(np.median(full))
-        bounded = triangle_chordal_error(corners, uv, surf, stop=stop)
-        under = full <= stop
-        assert np.array_equal(bounded[under], full[under])
-        assert (bounded[~under] > stop).all() and (bounded[~under] <= full[~under]).all()
-        nodes, tris = corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3)
-        assert np.array_equal(chordal.exact_over(bounded, stop, nodes, uv.reshape(-1, 2), tris, surf), full)
-        checked += len(corners) > _chordal_kernel.BLOCK
+        with compiled(True):
+            checked += _serial_equals_parallel(surf, corners, uv)
     assert checked, "no face large enough for the parallel kernel"
+
+
+def _serial_equals_parallel(surf, corners: np.ndarray, uv: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
+    """One face measured in one call (the parallel kernels) and in calls of 7 (the serial ones): the same values; with
+    a stop at the median, exact at or under it, bounded over it, and exact_over restores them. True when the face is
+    over one parallel block."""
+    from amprep.geometry.measure import _chordal_kernel, chordal
+
+    full = triangle_chordal_error(corners, uv, surf)
+    pieces = np.concatenate([triangle_chordal_error(corners[s:s + 7], uv[s:s + 7], surf)
+                             for s in range(0, len(corners), 7)])
+    assert np.array_equal(full, pieces)
+    stop = float(np.median(full))
+    bounded = triangle_chordal_error(corners, uv, surf, stop=stop)
+    under = full <= stop
+    assert np.array_equal(bounded[under], full[under])
+    assert (bounded[~under] > stop).all() and (bounded[~under] <= full[~under]).all()
+    nodes, tris = corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3)
+    assert np.array_equal(chordal.exact_over(bounded, stop, nodes, uv.reshape(-1, 2), tris, surf), full)
+    return len(corners) > _chordal_kernel.BLOCK

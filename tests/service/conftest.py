@@ -66,7 +66,8 @@ def service(tmp_path_factory: pytest.TempPathFactory):
     logs = tmp_path_factory.mktemp("logs")
     redis_proc, redis_url = start_redis(data)
     env = dict(os.environ, AMPREP_REDIS_URL=redis_url, AMPREP_DATA_DIR=str(data), AMPREP_CALLBACK_SECRET=SECRET,
-               AMPREP_MAX_JOBS_PER_PROCESS="50", PYTHONUNBUFFERED="1")
+               AMPREP_MAX_JOBS_PER_PROCESS="50", PYTHONUNBUFFERED="1",
+               AMPREP_CALLBACK_ALLOW="127.0.0.1")  # the tests' callback receivers listen on loopback
     env.pop("AMPREP_API_KEYS", None)
     # One process per queue: a test can tell which process runs its job and kill it.
     worker = _spawn([sys.executable, "-m", "celery", "-A", "workers.celery_app", "worker", "-Q", "quick,heavy",

@@ -22,12 +22,17 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _serve(data: Path, port: int, log: Path, **env: str) -> subprocess.Popen:
+    """`amprep serve` (the installed command) started from a folder that holds a folder named `amprep` whose import
+    fails, as a clone's parent does: no child may import it instead of the installed package."""
     e = dict(os.environ, **env)
     for k in ("AMPREP_REDIS_URL", "AMPREP_DATA_DIR", "AMPREP_API_KEYS"):
         e.pop(k, None)
-    return subprocess.Popen([sys.executable, "-m", "amprep", "serve", "--port", str(port), "--data", str(data),
-                             "--workers", "1"], env=e, cwd=ROOT, stdout=log.open("ab"), stderr=subprocess.STDOUT,
-                            start_new_session=True)
+    here = data.parent / "cwd"
+    (here / "amprep").mkdir(parents=True, exist_ok=True)
+    (here / "amprep" / "__init__.py").write_text("raise ImportError('the folder in the working directory')\n")
+    command = shutil.which("amprep") or pytest.skip("the amprep command is not installed")
+    return subprocess.Popen([command, "serve", "--port", str(port), "--data", str(data), "--workers", "1"], env=e,
+                            cwd=here, stdout=log.open("ab"), stderr=subprocess.STDOUT, start_new_session=True)
 
 
 def _ready(url: str, proc: subprocess.Popen, log: Path, timeout: float = 90) -> None:

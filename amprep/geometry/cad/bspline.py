@@ -6,6 +6,8 @@ import os
 
 import numpy as np
 
+from amprep.geometry.core.compiled import use_compiled
+
 
 def find_span(knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
     """(N,) int: the span i with knots[i] ≤ t < knots[i+1], clamped to [degree, n_poles − 1]."""
@@ -34,21 +36,10 @@ def basis_functions(knots: np.ndarray, degree: int, t: np.ndarray, span: np.ndar
     return basis
 
 
+#: a call of this many points runs the compiled kernel unless the enclosing computation chose (core/compiled.py)
 COMPILED_MIN_POINTS = 100_000
-#: numpy evaluation a process may do (points; B-spline points count 3× closed-form ones, being ~5× slower) before
-#: loading numba (0.5 s once) pays: many small calls add up once refinement drives them
-NUMPY_BUDGET = 1_500_000
 _kernel = None  # (parallel kernel, serial kernel, points per parallel block) once loaded
-_numpy_work = 0
 _CHUNK = 65536
-
-
-def spend_numpy(points: int) -> bool:
-    """Count `points` of numpy evaluation in this process; False once the total passes NUMPY_BUDGET (time to load
-    the compiled kernels)."""
-    global _numpy_work
-    _numpy_work += points
-    return _numpy_work < NUMPY_BUDGET
 
 
 def _eval_surface_numpy(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, udeg: int, vdeg: int,
@@ -87,23 +78,18 @@ def load_kernel() -> None:
     _kernel = (eval_surface_kernel, eval_surface_serial, EVAL_BLOCK)
 
 
-def kernel_loaded() -> bool:
-    """True once numba and the compiled kernels are loaded in this process (later calls of any size use them)."""
-    return _kernel is not None
-
-
 def eval_surface(
     poles: np.ndarray, weights: np.ndarray, uknots: np.ndarray, vknots: np.ndarray,
     udeg: int, vdeg: int, uv: np.ndarray,
 ) -> np.ndarray:
     """(N, 3) S(u,v) = Σ N_i(u) N_j(v) w_ij P_ij / Σ N_i(u) N_j(v) w_ij; poles (nu, nv, 3), weights (nu, nv).
 
-    Calls of ≥ COMPILED_MIN_POINTS points, every call once the process's numpy work passes NUMPY_BUDGET, and every
-    call once the kernel is loaded run the numba kernel of _bspline_kernel.py; the others run numpy, so a small part
-    never pays numba's ~0.7 s start-up."""
+    The numba kernel of _bspline_kernel.py runs where core.compiled.use_compiled says (the computation's choice, or
+    calls of ≥ COMPILED_MIN_POINTS points), numpy otherwise, so a small part never pays numba's ~0.7 s start-up and
+    no result depends on whether the kernel happens to be loaded."""
     global _kernel
     pw = np.ascontiguousarray(np.concatenate([poles * weights[..., None], weights[..., None]], axis=2))
-    if _kernel is None and len(uv) < COMPILED_MIN_POINTS and spend_numpy(3 * len(uv)):
+    if not use_compiled(len(uv), COMPILED_MIN_POINTS):
         return _eval_surface_numpy(pw, uknots, vknots, udeg, vdeg, np.asarray(uv, dtype=np.float64))
     if _kernel is None:
         load_kernel()

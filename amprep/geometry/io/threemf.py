@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import ctypes
+import hashlib
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -37,6 +39,12 @@ def split_objects(mesh: Mesh) -> list[tuple[str, np.ndarray]]:
     return out
 
 
+def _uuid(seed: str, what: str) -> str:
+    """A UUID from the mesh's content and the element's role: the same mesh gives the same 3MF bytes (lib3mf would
+    draw random ones)."""
+    return str(uuid.uuid5(uuid.NAMESPACE_URL, f"amprep:{seed}:{what}"))
+
+
 def write_3mf(mesh: Mesh, path: str | Path, metadata: Mapping[str, str] | None = None) -> list[bool]:
     """Write a 3MF; returns lib3mf's IsManifoldAndOriented per object (vertices shared within an object)."""
     wrapper = lib3mf.get_wrapper()
@@ -45,6 +53,8 @@ def write_3mf(mesh: Mesh, path: str | Path, metadata: Mapping[str, str] | None =
     group = model.GetMetaDataGroup()
     for key, value in (metadata or {}).items():
         group.AddMetaData(NAMESPACE, key, str(value), "xs:string", False)
+    seed = hashlib.sha256(mesh.vertices.tobytes() + mesh.triangles.tobytes()).hexdigest()
+    model.SetBuildUUID(_uuid(seed, "build"))
     verdicts = []
     for name, tri_idx in split_objects(mesh):
         tris = mesh.triangles[tri_idx]
@@ -61,7 +71,8 @@ def write_3mf(mesh: Mesh, path: str | Path, metadata: Mapping[str, str] | None =
                 ts = obj.AddTriangleSet(f"face-{fid}", f"CAD face {fid}")
                 ts.SetTriangleList([int(i) for i in chunk])
         verdicts.append(bool(obj.IsManifoldAndOriented()))
-        model.AddBuildItem(obj, wrapper.GetIdentityTransform())
+        obj.SetUUID(_uuid(seed, f"object {name}"))
+        model.AddBuildItem(obj, wrapper.GetIdentityTransform()).SetUUID(_uuid(seed, f"item {name}"))
     try:
         model.QueryWriter("3mf").WriteToFile(str(path))
     except lib3mf.ELib3MFException as exc:

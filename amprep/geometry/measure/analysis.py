@@ -11,11 +11,12 @@ import numpy as np
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure import cusp
-from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error
+from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error, worth_compiling
 from amprep.geometry.measure.cylindricity import minimum_zone
 from amprep.geometry.measure.defects import boundary_loops, defect_locations, nonmanifold_vertices, self_intersections
 from amprep.geometry.measure.regularity import MEASURES, regularity, summarize
@@ -165,7 +166,8 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     q = regularity(mesh.corners)
     summary = summarize(q)
     prog("chordal error", 0.4)
-    chordal = face_chordal_errors(mesh, surfaces or {}, params.sample_order)
+    with compiled(worth_compiling(mesh.n_triangles, params.sample_order)):  # decided by the mesh, not by timing
+        chordal = face_chordal_errors(mesh, surfaces or {}, params.sample_order)
     prog("cusp height", 0.6)
     c_tri, counted = cusp.approximate(mesh.corners, params.layer, b)
     box = cusp.bounding_box(mesh.corners, params.layer, b, params.cloud_density) if params.bounding_box else None

@@ -9,11 +9,13 @@ import numpy as np
 
 from amprep.geometry.cad import bspline as _bspline
 from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.core.compiled import compiled, use_compiled
 
 _CHUNK_POINTS = 1_000_000
 _kernels = None  # the _chordal_kernel module once loaded
 #: numba's start-up (~0.6 s per process) pays for itself from about 100k triangles at order 6 (the kernels run
-#: ~3× numpy's speed on 2 cores); a call this large loads them, and so does load_kernels() for a large job
+#: ~3× numpy's speed on 2 cores): a call this large runs them unless the enclosing computation chose
+#: (core/compiled.py; the mesher chooses for a whole part)
 COMPILED_MIN_POINTS = 3_000_000
 
 
@@ -57,16 +59,25 @@ def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
     patch = BRepBuilderAPI_MakeFace(GeomAPI_PointsToBSplineSurface(grid).Surface(), 1e-6).Face()
     cylinder = TopoDS.Face_s(TopExp_Explorer(BRepPrimAPI_MakeCylinder(1.0, 1.0).Shape(), TopAbs_FACE).Current())
     uv = np.array([[[0.1, 0.1], [0.5, 0.1], [0.1, 0.5]]])
-    for face in (cylinder, patch):
-        surface = surface_of(face)
-        corners = surface.evaluate(uv[0])[None]
-        for tris, points in ((1, 1), (_kernels.BLOCK + 1, EVAL_BLOCK + 1)):  # serial, then parallel kernels
-            surface.evaluate(np.repeat(uv[0], points, axis=0))
-            triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
+    with compiled(True):
+        for face in (cylinder, patch):
+            surface = surface_of(face)
+            corners = surface.evaluate(uv[0])[None]
+            for tris, points in ((1, 1), (_kernels.BLOCK + 1, EVAL_BLOCK + 1)):  # serial, then parallel kernels
+                surface.evaluate(np.repeat(uv[0], points, axis=0))
+                triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
+
+
+def worth_compiling(triangles: int, order: int, free_form: int = 0) -> bool:
+    """True when measuring `triangles` (of which `free_form` on B-spline or Bézier faces, which numpy evaluates ~5×
+    slower) on the order-k grid pays numba's start-up: the choice a whole computation makes (core.compiled)."""
+    points = len(barycentric_grid(order))
+    return triangles * points >= COMPILED_MIN_POINTS or free_form * points >= COMPILED_MIN_POINTS / 3
 
 
 def kernels_loaded() -> bool:
-    """True once every chordal measure in this process runs the compiled kernels."""
+    """True once the compiled kernels are loaded in this process (which evaluator a call uses is core.compiled's
+    choice, not this)."""
     return _kernels is not None
 
 
@@ -111,17 +122,15 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
 def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray,
               stop: float = np.inf) -> np.ndarray | None:
     """ε_T by the fused, threaded kernel of _chordal_kernel.py, or None where the surface has none (OCCT-evaluated
-    kinds) or the call is too small to pay numba's start-up before the kernel is loaded (while the process's numpy
-    work stays under bspline.NUMPY_BUDGET)."""
+    kinds) or core.compiled.use_compiled says numpy (the computation's choice, else a call too small to pay numba's
+    start-up), whether or not the kernels are loaded."""
     kind = surface.closed_form
     d = surface.data if surface.surface_type in ("bspline", "bezier") else None
     if kind is None and d is None:
         return None
+    if not use_compiled(len(corners) * len(w), COMPILED_MIN_POINTS):
+        return None
     if _kernels is None:
-        points = len(corners) * len(w)  # a B-spline's numpy points are counted where they are evaluated
-        if (points < COMPILED_MIN_POINTS and not _bspline.kernel_loaded()
-                and (d is not None or _bspline.spend_numpy(points))):
-            return None
         load_kernels()
     assert _kernels is not None
     out = np.empty(len(corners))

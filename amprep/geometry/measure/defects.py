@@ -154,8 +154,9 @@ def self_intersections(mesh: Mesh, examples: int = 100) -> tuple[int, np.ndarray
     t = mesh.triangles
     if len(t) < 2:
         return 0, np.zeros((0, 2), np.int64)
-    keep = ~degenerate_mask(mesh)
-    idx = np.flatnonzero(keep)
+    idx = np.flatnonzero(~degenerate_mask(mesh))
+    if len(idx) < 2:  # nothing with an area to cross (an STL of points, a single facet)
+        return 0, np.zeros((0, 2), np.int64)
     corners = mesh.vertices[t[idx]]
     pairs = _candidate_pairs(corners, t[idx])
     hit = np.zeros(len(pairs), bool)

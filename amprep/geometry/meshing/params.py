@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.limits import MIN_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -31,8 +32,8 @@ class MeshParams:
     def validate(self) -> None:
         """Raise invalid_parameter for values no mesher can honour."""
         bad = None
-        if not (self.tolerance > 0 and np.isfinite(self.tolerance)):
-            bad = f"tolerance must be a positive number of mm, got {self.tolerance}"
+        if not (self.tolerance >= MIN_TOLERANCE and np.isfinite(self.tolerance)):
+            bad = f"tolerance must be a number of mm ≥ {MIN_TOLERANCE:g}, got {self.tolerance}"
         elif self.relative is not None and not (0 < self.relative < 1):
             bad = f"relative tolerance must be a fraction in (0, 1), got {self.relative}"
         elif not (0 < self.angular <= np.pi / 2):

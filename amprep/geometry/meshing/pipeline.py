@@ -17,9 +17,10 @@ from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface, surface_of
 from amprep.geometry.cad.topology import Topology
 from amprep.geometry.core.checks import DEGENERATE_REL_AREA
+from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
-from amprep.geometry.measure.chordal import COMPILED_MIN_POINTS, barycentric_grid, load_kernels
+from amprep.geometry.measure.chordal import load_kernels, worth_compiling
 from amprep.geometry.meshing.enforce import FaceStates, enforce_tolerance
 from amprep.geometry.meshing.occt_check import first_look
 from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arrays
@@ -78,24 +79,27 @@ def mesh_prepared(prepared: Prepared, params: MeshParams, progress: ProgressFn |
     bulk = bulk_triangulation_arrays(model.faces) if not params.force_fallback else [None] * n_faces
     surfaces: list[Surface | None] = [surface_of(f) if BRep_Tool.Surface_s(f) is not None else None
                                       for f in model.faces]  # none: a tessellated-only face (stored triangles)
-    _load_kernels_for(bulk, surfaces, params.check_order)
-    prog("meshing", 0.45)
-    skip = ({i: "large_curved" for i in prepared.own} if not params.force_fallback
-            else dict.fromkeys(range(n_faces), "forced"))
-    looks = first_look(model.faces, topo, bulk, surfaces, skip, params.check_order, min_area)
-    patches: list[FacePatch | None] = []
-    fallback: dict[int, str] = {}
-    first_error: dict[int, np.ndarray] = {}
-    for i, look in enumerate(looks):
-        look.found.record(topo)
-        patches.append(look.found.assemble(model.faces[i], bulk[i]) if look.reason is None else None)
-        if look.reason is not None:
-            fallback[i] = look.reason
-        elif look.error is not None:
-            first_error[i] = look.error
-    prog("meshing", 0.5)
-    faces = FaceStates(model, topo, surfaces, params, tol, min_area, patches, fallback)
-    enforce_tolerance(faces, first_error, progress)
+    use = _compiled_for(bulk, surfaces, params.check_order)
+    if use:
+        load_kernels()
+    with compiled(use):  # one evaluator for the whole part, whatever is loaded (core/compiled.py)
+        prog("meshing", 0.45)
+        skip = ({i: "large_curved" for i in prepared.own} if not params.force_fallback
+                else dict.fromkeys(range(n_faces), "forced"))
+        looks = first_look(model.faces, topo, bulk, surfaces, skip, params.check_order, min_area)
+        patches: list[FacePatch | None] = []
+        fallback: dict[int, str] = {}
+        first_error: dict[int, np.ndarray] = {}
+        for i, look in enumerate(looks):
+            look.found.record(topo)
+            patches.append(look.found.assemble(model.faces[i], bulk[i]) if look.reason is None else None)
+            if look.reason is not None:
+                fallback[i] = look.reason
+            elif look.error is not None:
+                first_error[i] = look.error
+        prog("meshing", 0.5)
+        faces = FaceStates(model, topo, surfaces, params, tol, min_area, patches, fallback)
+        enforce_tolerance(faces, first_error, progress)
     infos = tuple(
         FaceInfo(i, surfaces[i].surface_type if surfaces[i] is not None else "none", model.face_solid[i],
                  patches[i].meshed_by if patches[i] is not None else "none")
@@ -108,12 +112,10 @@ def mesh_prepared(prepared: Prepared, params: MeshParams, progress: ProgressFn |
     return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))))
 
 
-def _load_kernels_for(bulk: list, surfaces: list[Surface | None], order: int) -> None:  # type: ignore[type-arg]
-    """Load the compiled kernels when every face's measure will pay numba's start-up once: a large part (B-splines
-    sooner: numpy evaluates them ~5× slower than closed forms)."""
-    points = len(barycentric_grid(order))
+def _compiled_for(bulk: list, surfaces: list[Surface | None], order: int) -> bool:  # type: ignore[type-arg]
+    """True when every face's measure runs the compiled kernels (chordal.worth_compiling of OCCT's first mesh):
+    decided by the part alone."""
     tri_count = [len(b[2]) if b is not None else 0 for b in bulk]
     free_form = sum(n for n, sf in zip(tri_count, surfaces, strict=True) if sf is not None and sf.data is not None
                     and sf.surface_type in ("bspline", "bezier"))
-    if sum(tri_count) * points >= COMPILED_MIN_POINTS or free_form * points >= COMPILED_MIN_POINTS / 3:
-        load_kernels()
+    return worth_compiling(sum(tri_count), order, free_form)

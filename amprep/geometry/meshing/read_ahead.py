@@ -37,15 +37,26 @@ def warm_delay(path: str | Path) -> float:
 
 
 def read_and_prepare(path: str | Path, fmt: str, params: MeshParams) -> Prepared:
-    """A CAD file read and prepared (its tolerance worked out, BRepMesh run at it) in this process."""
-    return prepare(read_cad(path, fmt), params)
+    """A CAD file read and prepared (its tolerance worked out, BRepMesh run at it) in this process, passed through
+    the same binary BREP the reading child sends back: the result does not depend on which process read it (the
+    round trip can move a coordinate by 1e-20)."""
+    return _received(_child(str(path), fmt, params), fmt)
 
 
 def _child(path: str, fmt: str, params: MeshParams) -> tuple[bytes, str, bool, float, tuple[int, ...]]:
-    p = read_and_prepare(path, fmt, params)
+    p = prepare(read_cad(path, fmt), params)
     buf = io.BytesIO()
     BinTools.Write_s(p.model.shape, buf, True, False, BinTools_FormatVersion.BinTools_FormatVersion_VERSION_3)
     return buf.getvalue(), p.model.units, p.model.sewn, p.tolerance, p.own
+
+
+def _received(sent: tuple[bytes, str, bool, float, tuple[int, ...]], fmt: str) -> Prepared:
+    data, units, sewn, tol, own = sent
+    shape = TopoDS_Shape()
+    BinTools.Read_s(shape, io.BytesIO(data))
+    if shape.IsNull():
+        raise AmprepError(ErrorCode.MESHING_FAILED, "the meshed shape did not come back from the reading process")
+    return Prepared(model_from_shape(shape, fmt, units, sewn), tol, own)
 
 
 def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams) -> Prepared:
@@ -61,9 +72,4 @@ def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams) -> Pr
         return read_and_prepare(path, fmt, params)
     if not job.ready(warm_delay(path)):
         warm_kernels(stop=job.ready)
-    data, units, sewn, tol, own = job.result()
-    shape = TopoDS_Shape()
-    BinTools.Read_s(shape, io.BytesIO(data))
-    if shape.IsNull():
-        raise AmprepError(ErrorCode.MESHING_FAILED, "the meshed shape did not come back from the reading process")
-    return Prepared(model_from_shape(shape, fmt, units, sewn), tol, own)
+    return _received(job.result(), fmt)

@@ -8,6 +8,7 @@ from OCP.BRepBndLib import BRepBndLib
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import CadModel
+from amprep.geometry.core.limits import MIN_TOLERANCE
 from amprep.geometry.meshing.params import MeshParams
 
 
@@ -32,4 +33,8 @@ def absolute_tolerance(model: CadModel, params: MeshParams) -> float:
     diag = bbox_diagonal(model)
     if diag <= 0:
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the model has an empty bounding box")
-    return params.relative * diag
+    tol = params.relative * diag
+    if tol < MIN_TOLERANCE:
+        raise AmprepError(ErrorCode.INVALID_PARAMETER, f"relative tolerance {params.relative:g} of this part's "
+                          f"{diag:.4g} mm diagonal is {tol:.3g} mm, under the finest of {MIN_TOLERANCE:g} mm")
+    return tol

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface, surface_of
 from amprep.geometry.core.mesh import Mesh
@@ -46,8 +47,11 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
     from amprep.geometry.placement.project import ReferenceCloud, isolate
 
     prog = prog or Progress(None)
-    prog("reference tessellation", 0.0)
     diag = float(np.linalg.norm(np.ptp(user.vertices, axis=0)))
+    if not diag > 0 or not np.isfinite(diag) or not cusp.unit_normals(user.corners)[1].sum() > 0:
+        raise AmprepError(ErrorCode.STL_MISMATCH, "the STL has no area to place on its CAD (every triangle is a point "
+                          "or a line)")
+    prog("reference tessellation", 0.0)
     ref_tol = min(mesh_params.tolerance, max(diag * 2e-4, 1e-3))
     reference = mesh_model(model, replace(mesh_params, tolerance=ref_tol, relative=None), prog.span(0.0, 0.6))
     spacing = max(diag / 400, 0.01)

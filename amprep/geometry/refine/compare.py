@@ -13,6 +13,7 @@ from amprep.geometry.cad.edge_curves import EdgeCurves
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.core.limits import MIN_TOLERANCE
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.measure import cusp
 from amprep.geometry.measure.analysis import AnalysisParams, face_chordal_errors
@@ -154,7 +155,7 @@ def uniform_curve(model: CadModel, start: float, target_triangles: int, surfaces
     rows: list[dict[str, Any]] = []
     prev: Mesh | None = None
     tol = start
-    floor = 1e-4 * max(start, 1e-3)
+    floor = max(1e-4 * max(start, 1e-3), MIN_TOLERANCE)
     for _ in range(max_steps):
         res = mesh_model(model, replace(mesh_params, tolerance=tol, relative=None))
         same = prev is not None and prev.n_triangles == res.mesh.n_triangles and np.array_equal(prev.vertices, res.mesh.vertices)
