@@ -135,7 +135,8 @@ def test_self_intersections_found_between_overlapping_bodies_only():
             tris.append(m.triangles + off)
             off += len(m.vertices)
         return Mesh.from_arrays(np.vstack(verts), np.vstack(tris))
-    n, examples = self_intersections(join(a, b))
+    n, examples, complete = self_intersections(join(a, b))
+    assert complete
     assert n > 0 and len(examples) == min(n, 100)
     assert self_intersections(join(a, c))[0] == 0
     assert self_intersections(a)[0] == 0
@@ -260,7 +261,7 @@ def test_self_intersection_broad_phase_finds_what_brute_force_finds(reference_so
     v = np.concatenate([a.vertices, a.vertices + [7.0, 3.0, 1.0]])
     t = np.concatenate([a.triangles, a.triangles + a.n_vertices])
     mesh = Mesh.from_arrays(v, t)
-    n, examples = self_intersections(mesh, examples=10**6)
+    n, examples, _ = self_intersections(mesh, examples=10**6)
     i, j = np.triu_indices(len(t), 1)
     distinct = ~(t[i][:, :, None] == t[j][:, None, :]).any(axis=(1, 2))
     i, j = i[distinct], j[distinct]

@@ -124,3 +124,20 @@ def test_without_keys_only_the_own_machine_is_served():
     assert status(("192.0.2.7", 5000)) == 401 and status(("203.0.113.9", 1), "/healthz") == 200
     assert status(("127.0.0.1", 5000)) == 200 and status(("::1", 5000)) == 200
     assert status(("192.0.2.7", 5000), insecure=True) == 200
+
+
+@pytest.mark.parametrize("tail", ["../../../../../../etc/passwd", "..%2F..%2F..%2F..%2Fetc%2Fpasswd",
+                                  "..%2Finput%2Fmodel.step", "%2e%2e/%2e%2e/summary.json", "part.stl%00.png"])
+def test_artifact_paths_do_not_leave_the_job(service, tail):
+    """Sent as raw bytes (httpx and browsers normalise `..` away before sending): every such name is a 404."""
+    import http.client
+
+    with service.client() as c:
+        job = submit(c, corpus(PART), wait=120).json()
+    u = urlsplit(service.url)
+    conn = http.client.HTTPConnection(u.hostname, u.port, timeout=30)
+    conn.request("GET", f"/v1/jobs/{job['id']}/artifacts/{tail}")
+    r = conn.getresponse()
+    body = r.read()
+    conn.close()
+    assert r.status == 404 and b"root:" not in body and b"ISO-10303" not in body

@@ -4,16 +4,20 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def overlap_pairs_kernel(node_lo, node_hi, n_inner, leaf_size, order, lo, hi, tris, out, stack):
-    """Pairs (i, j), i < j, of boxes lo/hi (n, 3) that overlap and whose triangles (n, 3) share no vertex.
+def overlap_pairs_kernel(node_lo, node_hi, n_inner, leaf_size, order, lo, hi, tris, out, stack, first, last, limit):
+    """Pairs (i, j), i < j, first ≤ i < last, of boxes lo/hi (n, 3) that overlap and whose triangles (n, 3) share no
+    vertex, written to `out` (pairs past its length are counted, not written).
 
     The tree is a heap: node k has children 2k+1, 2k+2; nodes ≥ n_inner are leaves, leaf l holding
-    order[l·leaf_size : (l+1)·leaf_size]. Writes up to len(out) pairs; returns how many there are in all."""
+    order[l·leaf_size : (l+1)·leaf_size]. Stops before a box i once `limit` pairs are found, so a call's work is
+    bounded; returns (pairs found, the first box not queried)."""
     n = lo.shape[0]
     count = 0
     cap = out.shape[0]
     n_nodes = node_lo.shape[0]
-    for i in range(n):
+    for i in range(first, last):
+        if count >= limit:
+            return count, i
         top = 0
         stack[0] = 0
         top = 1
@@ -51,5 +55,5 @@ def overlap_pairs_kernel(node_lo, node_hi, n_inner, leaf_size, order, lo, hi, tr
                 if c + 1 < n_nodes:
                     stack[top] = c + 1
                     top += 1
-    return count
+    return count, last
 

@@ -18,7 +18,13 @@ from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure import cusp
 from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error, worth_compiling
 from amprep.geometry.measure.cylindricity import minimum_zone
-from amprep.geometry.measure.defects import boundary_loops, defect_locations, nonmanifold_vertices, self_intersections
+from amprep.geometry.measure.defects import (
+    MAX_PAIRS,
+    boundary_loops,
+    defect_locations,
+    nonmanifold_vertices,
+    self_intersections,
+)
 from amprep.geometry.measure.regularity import MEASURES, regularity, summarize
 from amprep.geometry.measure.report import (
     SCHEMA,
@@ -155,11 +161,12 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     loops = boundary_loops(mesh, inc)
     nmv = nonmanifold_vertices(mesh, inc)
     prog("self-intersections", 0.15)
-    n_si, si_examples = self_intersections(mesh, params.intersection_examples)
+    n_si, si_examples, si_complete = self_intersections(mesh, params.intersection_examples,
+                                                         prog.span(0.15, 0.35))
     section = replace(mesh_section(mesh, checks, ok3d), defects={
         "boundary_loops": {"count": len(loops), "total_length": float(sum(loops)), "lengths": loops[:100]},
         "nonmanifold_vertices": int(len(nmv)),
-        "self_intersections": {"count": n_si, "examples": si_examples.tolist()},
+        "self_intersections": {"count": n_si, "examples": si_examples.tolist(), "complete": si_complete},
         "locations": defect_locations(mesh, inc, params.location_cap),
     })
     prog("regularity", 0.35)
@@ -170,7 +177,8 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
         chordal = face_chordal_errors(mesh, surfaces or {}, params.sample_order)
     prog("cusp height", 0.6)
     c_tri, counted = cusp.approximate(mesh.corners, params.layer, b)
-    box = cusp.bounding_box(mesh.corners, params.layer, b, params.cloud_density) if params.bounding_box else None
+    box = (cusp.bounding_box(mesh.corners, params.layer, b, params.cloud_density, progress=prog.span(0.6, 0.85))
+           if params.bounding_box else None)
     prog("per-face report", 0.85)
     has_cad = surfaces is not None
     faces = faces_section(mesh, chordal, surfaces or {}, params, q, n_faces) if has_cad else []
@@ -180,6 +188,9 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     issues = mesh_issues(checks, ok3d, tuple(f.id for f in faces if f.triangles == 0))
     if n_si:
         issues.append(Issue("self_intersections", "error", n_si, "pairs of triangles that cross each other"))
+    if not si_complete:
+        issues.append(Issue("self_intersections_incomplete", "warning", 1, "the self-intersection test stopped after "
+                            f"{MAX_PAIRS:,} pairs of overlapping triangles (a triangle soup?): the count is a lower bound"))
     if len(nmv):
         issues.append(Issue("nonmanifold_vertices", "error", int(len(nmv)),
                             "vertices where separate fans of triangles touch (bow-ties)"))

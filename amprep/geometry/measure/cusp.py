@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from amprep.geometry.core.progress import ProgressFn
+
 HORIZONTAL_COS = 1.0 - 1e-9  # |n̂·b̂| above this: a horizontal facet, printed flat, no stair step
 
 
@@ -132,8 +134,12 @@ class BoxCusp:
                 "density": self.density, "per_slice": per_slice}
 
 
+#: slice segments per call of the box kernel; cancel and the time limit are checked between calls (progress)
+SEGMENTS_PER_CALL = 20_000
+
+
 def bounding_box(corners: np.ndarray, layer: float, build_dir: np.ndarray, density: float | None = None,
-                 cloud: tuple[np.ndarray, np.ndarray] | None = None) -> BoxCusp:
+                 cloud: tuple[np.ndarray, np.ndarray] | None = None, progress: ProgressFn | None = None) -> BoxCusp:
     """Thesis 3.1: (1) cloud with facet normals; (2) slice segments P1P2; (3) for each, the rectangles P1 P2 Pm P3 on
     both sides (|P2Pm| = t, ⟂ P1P2, in the slice plane) extruded by t along b: two boxes; (4) for each cloud point in
     a box (found with KD-trees), the ray along its normal, reversed when the normal points away from the wall P1P2
@@ -142,7 +148,7 @@ def bounding_box(corners: np.ndarray, layer: float, build_dir: np.ndarray, densi
     wall, the top or the bottom: cusp height is a deviation across the layer, and a long box's end caps would
     otherwise measure the segment's length; points whose normal is parallel to the wall (n̂·d = 0: horizontal
     facets, walls at right angles) are not counted, as the approximate method skips horizontal facets. density: points per mm² (default (4/t)², at most 2 M points);
-    cloud: (points (p, 3), triangle of each (p,)) instead of sampling."""
+    cloud: (points (p, 3), triangle of each (p,)) instead of sampling; progress: called between blocks of segments."""
     b = np.asarray(build_dir, float) / np.linalg.norm(build_dir)
     unit, _ = unit_normals(corners)
     if cloud is None:
@@ -176,8 +182,15 @@ def bounding_box(corners: np.ndarray, layer: float, build_dir: np.ndarray, densi
     order = np.flatnonzero(ok)[np.argsort(keys[ok], kind="stable")]
     cell_keys, cell_start, counts = np.unique(keys[order], return_index=True, return_counts=True)
     height = np.full(2 * ns, -np.inf)
-    box_cusp_kernel(seg.slice_index, seg.p1, e, side, length, b, np.ascontiguousarray(frame[:2]), float(layer),
-                    float(cell), origin2, nx, ny, cell_keys, cell_start, cell_start + counts,
-                    np.ascontiguousarray(pts[order]), np.ascontiguousarray(normals[order]), height)
+    sorted_pts, sorted_normals = np.ascontiguousarray(pts[order]), np.ascontiguousarray(normals[order])
+    for s in range(0, ns, SEGMENTS_PER_CALL):  # in blocks, so that a cancel or a time limit is seen between them
+        sl = slice(s, min(s + SEGMENTS_PER_CALL, ns))
+        h = np.full(2 * (sl.stop - s), -np.inf)
+        box_cusp_kernel(seg.slice_index[sl], seg.p1[sl], e[sl], side[sl], length[sl], b,
+                        np.ascontiguousarray(frame[:2]), float(layer), float(cell), origin2, nx, ny, cell_keys,
+                        cell_start, cell_start + counts, sorted_pts, sorted_normals, h)
+        height[sl], height[ns + s:ns + sl.stop] = h[:sl.stop - s], h[sl.stop - s:]
+        if progress:
+            progress("cusp height", sl.stop / ns)
     height[~np.isfinite(height)] = np.nan
     return BoxCusp(np.concatenate([seg.slice_index, seg.slice_index]), height, seg.heights, len(pts), used)

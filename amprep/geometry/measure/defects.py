@@ -9,6 +9,7 @@ from scipy.sparse.csgraph import connected_components
 from amprep.geometry.core.checks import degenerate_mask
 from amprep.geometry.core.edges import EdgeIncidence, edge_incidence
 from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.core.progress import ProgressFn
 
 
 def boundary_loops(mesh: Mesh, inc: EdgeIncidence | None = None) -> list[float]:
@@ -93,21 +94,38 @@ def box_tree(lo: np.ndarray, hi: np.ndarray, leaf_size: int = 4) -> tuple[np.nda
     return node_lo, node_hi, size - 1, order
 
 
-def _candidate_pairs(corners: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(p, 2) triangle pairs i < j whose bounding boxes overlap and which share no vertex (broad phase): each box
-    queried against an implicit BVH in Morton order (the compiled kernel of _bvh_kernel.py)."""
+#: the broad phase stops after this many candidate pairs (a triangle soup has ~n²/2): the test is then incomplete
+MAX_PAIRS = 20_000_000
+#: candidate pairs found per kernel call, between which cancel and the time limit are checked (progress)
+PAIRS_PER_CALL = 2_000_000
+
+
+def _candidate_pairs(corners: np.ndarray, triangles: np.ndarray, progress: ProgressFn | None = None,
+                     max_pairs: int = MAX_PAIRS) -> tuple[np.ndarray, bool]:
+    """((p, 2) triangle pairs i < j whose bounding boxes overlap and which share no vertex, complete): the broad
+    phase, each box queried against an implicit BVH in Morton order (the compiled kernel of _bvh_kernel.py), in calls
+    of at most PAIRS_PER_CALL pairs with `progress` between them, and stopped (complete False) past max_pairs."""
     from amprep.geometry.measure._bvh_kernel import overlap_pairs_kernel
 
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     node_lo, node_hi, n_inner, order = box_tree(lo, hi)
     tris = np.ascontiguousarray(triangles, dtype=np.int64)
     stack = np.empty(256, np.int64)
-    out = np.empty((4 * len(lo) + 1024, 2), np.int64)
-    count = overlap_pairs_kernel(node_lo, node_hi, n_inner, 4, order, lo, hi, tris, out, stack)
-    if count > len(out):
-        out = np.empty((count, 2), np.int64)
-        overlap_pairs_kernel(node_lo, node_hi, n_inner, 4, order, lo, hi, tris, out, stack)
-    return out[:count]
+    n = len(lo)
+    out = np.empty((min(PAIRS_PER_CALL, max_pairs) + n, 2), np.int64)  # room for the last box's pairs past a limit
+    pieces, total, i = [], 0, 0
+    while i < n:
+        limit = min(PAIRS_PER_CALL, max_pairs - total)
+        count, i = overlap_pairs_kernel(node_lo, node_hi, n_inner, 4, order, lo, hi, tris, out, stack, i, n, limit)
+        if count > len(out):  # one box overlapping more than the room left: its pairs are not all written
+            return np.concatenate(pieces) if pieces else np.zeros((0, 2), np.int64), False
+        pieces.append(out[:count].copy())
+        total += count
+        if progress:
+            progress("self-intersections", i / n)
+        if i < n and total >= max_pairs:
+            return np.concatenate(pieces), False
+    return np.concatenate(pieces) if pieces else np.zeros((0, 2), np.int64), True
 
 
 def _interval_on_line(p: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -148,24 +166,29 @@ def triangles_cross(A: np.ndarray, B: np.ndarray, rel_eps: float = 1e-12) -> np.
     return out
 
 
-def self_intersections(mesh: Mesh, examples: int = 100) -> tuple[int, np.ndarray]:
-    """(count, (≤ examples, 2) pairs) of triangles that share no vertex and cross each other (triangles_cross);
-    coplanar overlaps and duplicates are counted elsewhere."""
+def self_intersections(mesh: Mesh, examples: int = 100, progress: ProgressFn | None = None,
+                       max_pairs: int = MAX_PAIRS) -> tuple[int, np.ndarray, bool]:
+    """(count, (≤ examples, 2) pairs, complete) of triangles that share no vertex and cross each other
+    (triangles_cross); coplanar overlaps and duplicates are counted elsewhere. `progress` is called between blocks
+    (a cancel or a time limit raised there stops the test); past max_pairs candidate pairs (a soup) the test stops
+    and complete is False, the count a lower bound."""
     t = mesh.triangles
     if len(t) < 2:
-        return 0, np.zeros((0, 2), np.int64)
+        return 0, np.zeros((0, 2), np.int64), True
     idx = np.flatnonzero(~degenerate_mask(mesh))
     if len(idx) < 2:  # nothing with an area to cross (an STL of points, a single facet)
-        return 0, np.zeros((0, 2), np.int64)
+        return 0, np.zeros((0, 2), np.int64), True
     corners = mesh.vertices[t[idx]]
-    pairs = _candidate_pairs(corners, t[idx])
+    pairs, complete = _candidate_pairs(corners, t[idx], progress, max_pairs)
     hit = np.zeros(len(pairs), bool)
     step = 500_000
     for s in range(0, len(pairs), step):
         p = pairs[s:s + step]
         hit[s:s + step] = triangles_cross(corners[p[:, 0]], corners[p[:, 1]])
+        if progress:
+            progress("self-intersections", 1.0)
     found = idx[pairs[hit]]
-    return int(len(found)), found[:examples]
+    return int(len(found)), found[:examples], complete
 
 
 def defect_locations(mesh: Mesh, inc: EdgeIncidence, cap: int = 1000) -> dict[str, dict]:  # type: ignore[type-arg]

@@ -55,7 +55,7 @@ def mesh_file(path: str | Path, fmt: str, params: MeshParams = MeshParams(),
     params.validate()
     if progress:
         progress("reading", 0.0)
-    prepared = read_and_prepare_ahead(path, fmt, params)
+    prepared = read_and_prepare_ahead(path, fmt, params, progress)
     return prepared.model, mesh_prepared(prepared, params, progress)
 
 

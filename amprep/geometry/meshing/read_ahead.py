@@ -14,11 +14,12 @@ from OCP.TopoDS import TopoDS_Shape
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.core.progress import ProgressFn
 from amprep.geometry.measure.chordal import kernels_loaded, warm_kernels
 from amprep.geometry.meshing.brepmesh import occt_pool_untouched
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import Prepared, prepare
-from amprep.geometry.parallel.forked import Forked
+from amprep.geometry.parallel.forked import Forked, fork_available
 
 #: a file this large takes the child over ~0.5 s to read (STEP parses at 1.5–5 MB/s here), which hides numba's
 #: import and first dispatch (~0.65 s), and its part is large: the kernels are warmed at once
@@ -59,17 +60,24 @@ def _received(sent: tuple[bytes, str, bool, float, tuple[int, ...]], fmt: str) -
     return Prepared(model_from_shape(shape, fmt, units, sewn), tol, own)
 
 
-def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams) -> Prepared:
-    """read_and_prepare, in a forked child while this process warms the kernels (when they are not loaded yet and a
-    second core exists; after warm_delay; in this process otherwise). OCCT's parallel meshing runs in the child only
-    when this process never started OCCT's thread pool. A child that dies (OCCT crashing on the file) is unreadable_cad."""
-    if kernels_loaded():
-        return read_and_prepare(path, fmt, params)
+def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams,
+                           progress: ProgressFn | None = None) -> Prepared:
+    """read_and_prepare in a forked child, wherever the platform forks (a Celery worker too): a file that crashes
+    OCCT ends the child, not this process, and is unreadable_cad. Meanwhile this process warms the kernels (when
+    they are not loaded yet and it may use a second core; after warm_delay), then calls progress("reading", 0) every
+    half second, so a cancel or a time limit raised there stops the child at once. OCCT's parallel meshing runs in
+    the child only when this process never started OCCT's thread pool (it gives the same mesh either way)."""
     child_params = replace(params, parallel=params.parallel and occt_pool_untouched())
-    job = Forked(_child, str(path), fmt, child_params,
+    job = Forked(_child, str(path), fmt, child_params, isolate=True,
                  died=(ErrorCode.UNREADABLE_CAD, f"OCCT crashed reading or meshing the {fmt.upper()} file"))
     if not job.forked:
         return read_and_prepare(path, fmt, params)
-    if not job.ready(warm_delay(path)):
-        warm_kernels(stop=job.ready)
-    return _received(job.result(), fmt)
+    try:
+        if not kernels_loaded() and fork_available() and not job.ready(warm_delay(path)):
+            warm_kernels(stop=job.ready)
+        while not job.ready(0.5):
+            if progress:
+                progress("reading", 0.0)
+        return _received(job.result(), fmt)
+    finally:
+        job.kill()  # a cancel, a time limit or any error here: the child does not read on (no-op once collected)

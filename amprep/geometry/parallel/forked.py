@@ -33,17 +33,18 @@ def fork_available() -> bool:
 
 
 class Forked(Generic[T]):
-    """fn(*args) started in a forked child (inline at result() when fork_available() is False or `fork` is False).
+    """fn(*args) started in a forked child (inline at result() when fork_available() is False or `fork` is False;
+    with `isolate`, forked wherever os.fork exists, one core or a daemonic worker too: for a crash to end the child).
     The child must only read what it inherits: its changes to the caller's objects are lost. An AmprepError in the
     child is raised again by result(); any other exception or a dead child raises `died` (code, message)."""
 
     def __init__(self, fn: Callable[..., T], *args: Any, died: tuple[ErrorCode, str] = (
-            ErrorCode.INTERNAL_ERROR, "a helper process died"), fork: bool = True) -> None:
+            ErrorCode.INTERNAL_ERROR, "a helper process died"), fork: bool = True, isolate: bool = False) -> None:
         self._fn, self._args, self._died = fn, args, died
         self._pid = 0
         self._fd = -1
         self._value: tuple[str, Any] | None = None
-        if fork and fork_available():
+        if fork and (fork_available() or (isolate and hasattr(os, "fork"))):
             self._start()
 
     @property

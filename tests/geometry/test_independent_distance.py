@@ -1,0 +1,50 @@
+"""The tolerance checked by something other than our own chordal measure: OCCT's BRepExtrema_DistShapeShape from
+points on the output's triangles to their CAD face (trimmed, with its location), on the analytic and free-form test
+solids and on real parts of the corpus."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeVertex
+from OCP.BRepExtrema import BRepExtrema_DistShapeShape
+from OCP.gp import gp_Pnt
+
+from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+from tests.conftest import corpus
+
+#: barycentric points of each sampled triangle: its centroid and the midpoints between centroid and corners
+WEIGHTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
+
+
+def _worst_distance(model, mesh, samples: int = 600, seed: int = 5) -> float:
+    """Largest distance from points on `samples` random triangles (with a face) to their own CAD face, by OCCT."""
+    rng = np.random.default_rng(seed)
+    tris = np.flatnonzero(mesh.face_ids >= 0)
+    tris = rng.choice(tris, min(samples, len(tris)), replace=False)
+    worst = 0.0
+    for t in tris:
+        face = model.faces[int(mesh.face_ids[t])]
+        for p in WEIGHTS @ mesh.corners[t]:
+            v = BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, p))).Vertex()
+            ext = BRepExtrema_DistShapeShape(v, face)
+            assert ext.IsDone()
+            worst = max(worst, ext.Value())
+    return worst
+
+
+@pytest.mark.parametrize("tol", [0.1, 0.01])
+@pytest.mark.parametrize("name", ["cone", "filleted_block", "bspline_loft"])
+def test_test_solids_within_tolerance_by_occt(reference_solids, name, tol):
+    model = model_from_shape(reference_solids[name])
+    r = mesh_model(model, MeshParams(tolerance=tol))
+    assert _worst_distance(model, r.mesh) <= tol * 1.001
+
+
+@pytest.mark.parametrize("name, tol", [("voron_hotend_mount_dragon.step", 0.02), ("featuretype_inch_ap214.step", 0.05)])
+def test_corpus_parts_within_tolerance_by_occt(name, tol):
+    model = read_cad(corpus(name))
+    r = mesh_model(model, MeshParams(tolerance=tol))
+    assert _worst_distance(model, r.mesh) <= tol * 1.001

@@ -1,0 +1,66 @@
+"""Every long loop honours cancel and the time limit, and a soup cannot make the self-intersection test quadratic:
+the broad phase stops after a budget of candidate pairs and says so."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh
+from amprep.geometry.measure.defects import self_intersections
+
+
+def _soup(n: int, seed: int = 3) -> Mesh:
+    """n random triangles spanning a unit cube: nearly every pair of boxes overlaps (a soup's worst case)."""
+    corners = np.random.default_rng(seed).uniform(0, 1, size=(n, 3, 3))
+    return Mesh.from_arrays(corners.reshape(-1, 3), np.arange(3 * n).reshape(-1, 3))
+
+
+def test_a_soup_stops_at_the_pair_budget_and_says_so():
+    mesh = _soup(3000)  # ~4.5 M overlapping pairs
+    full = self_intersections(mesh)
+    capped = self_intersections(mesh, max_pairs=100_000)
+    assert full[2] and not capped[2]
+    assert 0 < capped[0] < full[0]
+
+
+def test_progress_runs_between_blocks_and_a_cancel_stops_the_test(monkeypatch):
+    from amprep.geometry.measure import defects
+
+    monkeypatch.setattr(defects, "PAIRS_PER_CALL", 50_000)
+    calls: list[float] = []
+    self_intersections(_soup(1500), progress=lambda stage, f: calls.append(f))
+    assert len(calls) > 5  # ~1.1 M pairs in blocks of 50k
+
+    def cancel(stage: str, fraction: float) -> None:
+        raise AmprepError(ErrorCode.CANCELLED, "the job was cancelled")
+
+    with pytest.raises(AmprepError) as e:
+        self_intersections(_soup(1500), progress=cancel)
+    assert e.value.code == ErrorCode.CANCELLED
+
+
+def test_the_report_says_when_the_test_stopped(monkeypatch):
+    from amprep.geometry.measure import analysis
+
+    monkeypatch.setattr(analysis, "self_intersections",
+                        lambda mesh, examples, progress: self_intersections(mesh, examples, progress, max_pairs=1000))
+    a = analyze_mesh(_soup(400), AnalysisParams(bounding_box=False))
+    assert a.report["mesh"]["self_intersections"]["complete"] is False
+    assert "self_intersections_incomplete" in [i["code"] for i in a.report["issues"]]
+
+
+def test_the_box_cusp_method_runs_in_blocks_with_the_same_answer(monkeypatch):
+    from amprep.geometry.measure import cusp
+
+    mesh = _soup(800)
+    z = np.array([0.0, 0.0, 1.0])
+    whole = cusp.bounding_box(mesh.corners, 0.05, z, density=400.0)
+    monkeypatch.setattr(cusp, "SEGMENTS_PER_CALL", 97)
+    calls: list[float] = []
+    blocks = cusp.bounding_box(mesh.corners, 0.05, z, density=400.0, progress=lambda s, f: calls.append(f))
+    assert len(calls) > 10 and calls[-1] == 1.0
+    np.testing.assert_array_equal(whole.height, blocks.height)
+    assert np.isfinite(whole.height).sum() > 100
