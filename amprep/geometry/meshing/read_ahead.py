@@ -1,7 +1,8 @@
-"""Read and prepare (prepare.py: tolerance, BRepMesh) a CAD file in a forked child while this process loads the compiled kernels: reading a STEP
-and OCCT's meshing hold the GIL, and so does numba's start-up, so only two processes overlap them. The child hands
-the meshed shape back in OCCT's binary BREP (triangulations and edge polygons included, read back in ~20 ms for
-CTC-02), so the caller continues exactly as if it had read and meshed it itself."""
+"""Read and prepare a CAD file (prepare.py: tolerance, BRepMesh) in a forked child: a file that crashes OCCT ends the
+child, not this process, and meanwhile this process loads the compiled kernels (reading a STEP, OCCT's meshing and
+numba's start-up all hold the GIL, so only two processes overlap them). The child hands the meshed shape back in
+OCCT's binary BREP (triangulations and edge polygons included, read back in ~20 ms for CTC-02), so the caller
+continues exactly as if it had read and meshed it itself."""
 
 from __future__ import annotations
 
