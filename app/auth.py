@@ -5,12 +5,11 @@ Docker). The health checks and the API's own documentation are open."""
 
 from __future__ import annotations
 
-import ipaddress
-
 from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from amprep.errors import ErrorCode
+from amprep.serve import is_loopback
 from amprep.settings import hash_key
 
 from .problems import problem
@@ -19,12 +18,8 @@ OPEN_PATHS = frozenset({"/healthz", "/readyz", "/docs", "/docs/oauth2-redirect",
 
 
 def _loopback(client: tuple[str, int] | None) -> bool:
-    if client is None:  # an in-process test client
-        return True
-    try:
-        return ipaddress.ip_address(client[0].split("%")[0]).is_loopback
-    except ValueError:
-        return client[0] in ("localhost", "testclient")
+    """True for a client on this machine (None or starlette's 'testclient': an in-process test client)."""
+    return client is None or client[0] == "testclient" or is_loopback(client[0].split("%")[0])
 
 
 def valid_key(authorization: str | None, keys: frozenset[str]) -> str | None:
