@@ -43,8 +43,12 @@ def test_test_solids_within_tolerance_by_occt(reference_solids, name, tol):
     assert _worst_distance(model, r.mesh) <= tol * 1.001
 
 
-@pytest.mark.parametrize("name, tol", [("voron_hotend_mount_dragon.step", 0.02), ("featuretype_inch_ap214.step", 0.05)])
+@pytest.mark.parametrize("name, tol", [("voron_hotend_mount_dragon.step", 0.02), ("featuretype_inch_ap214.step", 0.05),
+                                       ("as1_assembly_ap214.stp", 0.1), ("as1_assembly_ap214.stp", 0.01),
+                                       ("cq_cube_cylinder_colors.step", 0.01)])
 def test_corpus_parts_within_tolerance_by_occt(name, tol):
+    """Real parts, among them an assembly of 18 placed solids (as1: nested placements, bolts and nuts used several
+    times) and a file in metres: measured in the output's coordinates, after every location and unit scale."""
     model = read_cad(corpus(name))
     r = mesh_model(model, MeshParams(tolerance=tol))
     assert _worst_distance(model, r.mesh) <= tol * 1.001
