@@ -11,6 +11,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from amprep import __version__
 from amprep.errors import AmprepError, ErrorCode
 from amprep.jobs.params import KINDS, build, check, parse_cli_value
 
@@ -281,18 +282,9 @@ def _job_parser(sub: Any, kind: str, func: Callable[[argparse.Namespace], int]) 
     sp.set_defaults(func=func)
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("amprep")
-    except PackageNotFoundError:
-        return "unknown"
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="amprep", description="CAD to print-ready STL, with numbers.")
-    parser.add_argument("--version", action="version", version=f"amprep {_version()}")
+    parser.add_argument("--version", action="version", version=f"amprep {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for kind, func in (("convert", cmd_convert), ("analyze", cmd_analyze), ("refine", cmd_refine)):
         _job_parser(sub, kind, func)

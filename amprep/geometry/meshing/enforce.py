@@ -58,7 +58,7 @@ class FaceStates:
     min_area: float
     patches: list[FacePatch | None]
     fallback: dict[int, str]
-    errors: list[np.ndarray] = field(default_factory=list)
+    errors: list[np.ndarray] = field(init=False)
     unmeshed: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -175,9 +175,9 @@ def _mend(f: FaceStates, over: list[int], todo: set[int]) -> None:
 
 def _costliest_first(fn: Callable[[int], FacePatch | None], faces: list[int], patches: list[FacePatch | None],
                      errors: list[np.ndarray], target: float) -> dict[int, FacePatch | None]:
-    """{i: fn(i)} for the faces, through face_pool.map_faces, costliest first by _remesh_cost. In parallel only once
-    the compiled kernels run every chordal measure (numpy's floats differ in the last bits, and which faces a process
-    would measure in numpy depends on timing): the result stays deterministic."""
+    """{i: fn(i)} for the faces, through face_pool.map_faces, costliest first by _remesh_cost; in parallel once the
+    compiled kernels are loaded (which evaluator measures is the part's choice, core/compiled.py, so the result is
+    the same either way)."""
     cost = {i: _remesh_cost(patches[i], errors[i], target) for i in faces}
     order = sorted(faces, key=lambda i: (-cost[i], i))
     return map_faces(fn, order, ready=kernels_loaded, cost=[cost[i] for i in order])
