@@ -39,3 +39,45 @@ def test_duplicate_count_counts_repeated_vertex_sets_in_any_order(offset):
     t = np.array([[0, 1, 2], [2, 0, 1], [1, 0, 2], [0, 1, 3], [3, 1, 0], [4, 5, 6]]) + offset
     assert duplicate_count(t) == 3
     assert duplicate_count(t[[0, 3, 5]]) == 0
+
+
+def _box(lo, hi, outward=True):
+    """(8, 3) corners and (12, 3) triangles of an axis-aligned box, wound outward (or inward)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    v = np.array([[(hi if (i >> k) & 1 else lo)[k] for k in range(3)] for i in range(8)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    t = np.array([tri for a, b, c, d in quads for tri in ((a, b, c), (a, c, d))])
+    return v, (t if outward else t[:, [0, 2, 1]])
+
+
+def _mesh(*boxes):
+    from amprep.geometry.core.mesh import Mesh
+
+    verts, tris, n = [], [], 0
+    for v, t in boxes:
+        verts.append(v)
+        tris.append(t + n)
+        n += len(v)
+    return Mesh.from_arrays(np.concatenate(verts), np.concatenate(tris))
+
+
+@pytest.mark.parametrize("boxes, expected", [
+    ([((0, 0, 0), (1, 1, 1), True)], 0),
+    ([((0, 0, 0), (1, 1, 1), False)], 1),
+    ([((0, 0, 0), (4, 4, 4), True), ((1, 1, 1), (2, 2, 2), False)], 0),  # a cavity
+    ([((0, 0, 0), (4, 4, 4), True), ((5, 1, 1), (6, 2, 2), False)], 1),  # beside, not inside
+    ([((0, 0, 0), (4, 4, 4), False), ((1, 1, 1), (2, 2, 2), False)], 2),  # an inverted solid holding an inverted one
+], ids=["box", "inverted", "cavity", "inverted_beside", "nested_inverted"])
+def test_inside_out_shells_tells_a_cavity_from_an_inverted_solid(boxes, expected):
+    from amprep.geometry.core.checks import check_mesh
+
+    checks = check_mesh(_mesh(*(_box(lo, hi, out) for lo, hi, out in boxes)))
+    assert checks.closed and checks.inside_out_shells == expected
+
+
+def test_winding_number_of_a_box_is_one_inside_and_zero_outside():
+    from amprep.geometry.core.checks import winding_numbers
+
+    v, t = _box((0, 0, 0), (2, 3, 4))
+    w = winding_numbers(np.array([[1, 1, 1], [1.9, 2.9, 3.9], [3, 1, 1], [-1, -1, -1]], float), v[t])
+    assert np.allclose(w, [1, 1, 0, 0], atol=1e-9)

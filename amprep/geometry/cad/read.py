@@ -26,6 +26,7 @@ from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_Ind
 from OCP.XSControl import XSControl_Reader
 
 from amprep.errors import AmprepError, ErrorCode, is_occt_failure
+from amprep.geometry.cad.locations import bake_scaled_locations
 from amprep.geometry.cad.topology import compound, explore
 from amprep.geometry.cad.wire_crossings import crossing_faces
 from amprep.geometry.core.formats import sniff_path
@@ -187,9 +188,11 @@ def sew_loose_faces(shape: TopoDS_Shape, tolerance: float = SEW_TOLERANCE) -> tu
 
 
 def model_from_shape(shape: TopoDS_Shape, fmt: str = "brep", units: str = "none", sewn: bool = False) -> CadModel:
-    """Index the faces and solids of a shape (faces in TopExp order; an assembly's instances are distinct)."""
+    """Index the faces and solids of a shape (faces in TopExp order; an assembly's instances are distinct), after
+folding any scaling location into the geometry (locations.py)."""
     if shape is None or shape.IsNull():
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the file holds no shape")
+    shape, _ = bake_scaled_locations(shape)
     faces_map = _indexed(shape, TopAbs_FACE)
     if faces_map.Extent() == 0:
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the file holds no faces")

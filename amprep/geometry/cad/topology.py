@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_VERTEX
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
@@ -19,6 +19,15 @@ def trsf_matrix(loc: TopLoc_Location) -> np.ndarray | None:
         return None
     t = loc.Transformation()
     return np.array([[t.Value(r, c) for c in range(1, 5)] for r in range(1, 4)])
+
+
+def winds_inward(face: TopoDS_Face) -> bool:
+    """True when triangles wound counter-clockwise in the face's (u,v) (normal S_u × S_v of its placed surface) face
+    into the material: the face is REVERSED, or placed by a mirroring location (det < 0), but not both. A mirror
+    turns the surface's normal but not the face's orientation flag, so a mirrored instance would come out inside
+    out without the second test."""
+    mirrored = not face.Location().IsIdentity() and face.Location().Transformation().IsNegative()
+    return (face.Orientation() == TopAbs_REVERSED) != mirrored
 
 
 def apply_trsf(m: np.ndarray | None, pts: np.ndarray) -> np.ndarray:

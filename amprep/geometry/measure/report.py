@@ -86,7 +86,7 @@ class MeshSection:
             "manifold3d": self.manifold3d, "boundary_edges": c.boundary_edges,
             "nonmanifold_edges": c.nonmanifold_edges, "misoriented_edges": c.misoriented_edges,
             "degenerate_triangles": c.degenerate_triangles, "duplicate_triangles": c.duplicate_triangles,
-            "shells": c.shells, "volume": c.volume, "area": c.area,
+            "shells": c.shells, "inside_out_shells": c.inside_out_shells, "volume": c.volume, "area": c.area,
             "bbox": {"min": list(self.bbox[0]), "max": list(self.bbox[1])},
         }
         return out | (self.defects or {}) | (self.extra or {})
@@ -136,8 +136,9 @@ def mesh_issues(checks: MeshChecks, manifold3d: bool, unmeshed_faces: tuple[int,
     if unmeshed_faces:
         out.append(Issue("unmeshed_faces", "error", len(unmeshed_faces), "CAD faces that got no triangles",
                          tuple(unmeshed_faces[:1000])))
-    if checks.volume <= 0 and checks.closed:
-        out.append(Issue("inside_out", "error", 1, "the closed mesh has negative volume: its normals point inwards"))
+    if checks.inside_out_shells or (checks.volume <= 0 and checks.closed):
+        out.append(Issue("inside_out", "error", max(checks.inside_out_shells, 1),
+                         "closed shells of negative volume that enclose no cavity: their normals point inwards"))
     if checks.closed and not manifold3d:
         out.append(Issue("manifold3d_rejects", "error", 1, "our edge checks find it closed but manifold3d rejects it"))
     if not checks.closed and manifold3d:

@@ -13,7 +13,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.cad.topology import Topology, explore, face_edges
+from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.meshing.local_refine import flip_flat_triangles, refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -202,7 +202,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     node_edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
     node_param[:nb] = np.concatenate([lp["param"] for lp in loops])
     # CDT triangles are counter-clockwise in (u,v): outward when the surface normal S_u × S_v points out
-    flip = face.Orientation() == TopAbs_REVERSED
+    flip = winds_inward(face)
     patch = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris, node_vertex, node_edge,
                       node_param, meshed_by="fallback", error=err)
     if (err > tolerance).any():

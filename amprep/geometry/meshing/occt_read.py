@@ -14,11 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from OCP.BinTools import BinTools, BinTools_FormatVersion
 from OCP.BRep import BRep_Builder, BRep_Tool
-from OCP.TopAbs import TopAbs_REVERSED
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS_Compound, TopoDS_Face
 
-from amprep.geometry.cad.topology import Topology, apply_trsf, face_edges, trsf_matrix
+from amprep.geometry.cad.topology import Topology, apply_trsf, face_edges, trsf_matrix, winds_inward
 from amprep.geometry.core.edges import edge_codes
 
 
@@ -149,7 +148,7 @@ class PatchRead:
         """`patch` from the face's triangulation arrays (local frame) moved by `loc`, oriented as the face, and the
         node keys (k,) each."""
         nodes, uv, tris = arrays
-        if face.Orientation() == TopAbs_REVERSED:
+        if winds_inward(face):
             tris = tris[:, [0, 2, 1]]
         self.patch = FacePatch(self.face_id, apply_trsf(trsf_matrix(loc), nodes), uv, tris, node_vertex, node_edge,
                                node_param, meshed_by="stored" if self.stored else "occt")
