@@ -19,6 +19,7 @@ class ErrorCode(StrEnum):
     NOT_IMPLEMENTED = "not_implemented"
     STL_MISMATCH = "stl_mismatch"
     OUTPUT_TOO_LARGE = "output_too_large"
+    MEMORY_LIMIT = "memory_limit"
     # Raised by the service around the library (jobs and HTTP), listed here so there is one enum of codes.
     WORKER_CRASHED = "worker_crashed"
     TIME_LIMIT = "time_limit"
@@ -45,8 +46,17 @@ class AmprepError(Exception):
         return f"{self.code.value}: {self.message}"
 
 
+def out_of_memory(exc: BaseException) -> bool:
+    """True for a failed allocation: Python's MemoryError or OCCT's Standard_OutOfMemory (past the job's memory
+    limit, amprep/memory.py)."""
+    return isinstance(exc, MemoryError) or "OutOfMemory" in type(exc).__name__
+
+
 def is_occt_failure(exc: BaseException) -> bool:
     """True for an exception OCCT raised through OCP (its Standard_Failure family, classes of OCP's modules, or
     pybind11's RuntimeError for another C++ exception): what the library turns into a stable code. Anything else
-    (a job's time limit or a cancellation arriving while OCCT ran, a bug) must pass through unchanged."""
+    (a job's time limit or a cancellation arriving while OCCT ran, an allocation past the memory limit, a bug) must
+    pass through unchanged."""
+    if out_of_memory(exc):
+        return False
     return type(exc).__module__.startswith("OCP") or type(exc) is RuntimeError

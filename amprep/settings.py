@@ -45,6 +45,10 @@ class Settings(BaseSettings):
     hard_time_limit_heavy: int = Field(3720, gt=0)
     max_jobs_per_process: int = Field(20, gt=0, description="A worker process is replaced after this many jobs")
     max_crashes: int = Field(2, gt=0, description="Worker-process deaths before a job fails with worker_crashed")
+    max_triangles: int = Field(20_000_000, gt=0, description="The most triangles any job may output: a job's own "
+                               "max_triangles above it is lowered to it")
+    memory_limit_mb: int = Field(8192, ge=0, description="Address space a job may add to its worker process (RLIMIT_AS, "
+                                 "MiB); past it the job fails with memory_limit. 0: no limit")
     allow_insecure_bind: bool = Field(False, description="Serve on a non-loopback address without API keys")
 
     @field_validator("api_keys", mode="before")

@@ -16,11 +16,12 @@ from celery import Task
 from celery.exceptions import SoftTimeLimitExceeded, TimeLimitExceeded
 
 from amprep import callbacks
-from amprep.errors import AmprepError, ErrorCode
+from amprep.errors import AmprepError, ErrorCode, out_of_memory
 from amprep.jobs.common import provenance
 from amprep.jobs.params import KINDS, JobKind
 from amprep.jobs.runner import run
 from amprep.logs import job_id_var
+from amprep.memory import memory_budget
 from amprep.queue import CALLBACK_TASK
 from amprep.settings import get_settings
 from amprep.store import JobStore, now
@@ -90,8 +91,11 @@ def run_job(job_id: str) -> None:
     log.info("started", extra={"kind": job.kind})
     src = st.input_path(job_id, job.input["file"]["stored_as"])
     stl = st.input_path(job_id, job.input["stl"]["stored_as"]) if job.input.get("stl") else None
+    params = job.params | {"max_triangles": min(job.params.get("max_triangles", settings.max_triangles),
+                                                settings.max_triangles)}
     try:
-        result, paths = run(job.kind, src, job.params, st.job_dir(job_id) / "out", _Reporter(job_id), stl)
+        with memory_budget(settings.memory_limit_mb):
+            result, paths = run(job.kind, src, params, st.job_dir(job_id) / "out", _Reporter(job_id), stl)
         artifacts = [st.add_artifact(job_id, p) for p in paths]
     except AmprepError as exc:
         if exc.code == ErrorCode.CANCELLED:
@@ -103,10 +107,11 @@ def run_job(job_id: str) -> None:
     except SoftTimeLimitExceeded:
         _finish(job_id, "failed", error={"code": ErrorCode.TIME_LIMIT.value, "message": "the job ran over its time limit"})
         return
-    except MemoryError:
-        _finish(job_id, "failed", error={"code": ErrorCode.INTERNAL_ERROR.value, "message": "out of memory"})
-        return
     except Exception as exc:  # a bug of ours: the job fails with a code, the worker goes on
+        if out_of_memory(exc):
+            _finish(job_id, "failed", error={"code": ErrorCode.MEMORY_LIMIT.value, "message": "the job ran out of "
+                    f"memory: it may add {settings.memory_limit_mb} MiB to its worker (AMPREP_MEMORY_LIMIT_MB)"})
+            return
         log.exception("unexpected error")
         _finish(job_id, "failed", error={"code": ErrorCode.INTERNAL_ERROR.value, "message": f"{type(exc).__name__}: {exc}"})
         return

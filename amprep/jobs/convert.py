@@ -52,6 +52,7 @@ class ConvertResult:
                 "within_tolerance": bool(m.max_error <= m.tolerance * (1 + 1e-9)) if m.max_error == m.max_error else None,
                 "fallback_faces": {str(k): v for k, v in sorted(m.fallback_faces.items())},
                 "unmeshed_faces": list(m.unmeshed_faces),
+                "estimated_triangles": m.estimated_triangles,
             }
         return out
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.core.limits import MIN_TOLERANCE
+from amprep.geometry.core.limits import DEFAULT_MAX_TRIANGLES, MAX_TRIANGLES_CAP, MIN_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -91,6 +91,9 @@ def _meshing(tolerance: float, help_tolerance: str) -> tuple[Param, ...]:
         Param("occt_edges", "bool", False, "Discretise every B-rep edge as OCCT's BRepMesh does, at half the tolerance "
               "and half the angle (more triangles); off: at 0.95× the tolerance where only ruled faces meet (planes, "
               "cylinders, cones, extrusions)"),
+        Param("max_triangles", "int", DEFAULT_MAX_TRIANGLES, "Refuse (output_too_large) a job whose output is "
+              "predicted to have more triangles than this: for CAD, estimated from the B-rep before meshing; for "
+              "refine, the refinement's own size", ge=1, le=MAX_TRIANGLES_CAP),
         Param("own_large_faces", "bool", True, "Mesh torus faces expected to need 20,000 triangles or more ourselves "
               "from curvature-sized points (faster than OCCT, fewer triangles); off leaves every face to OCCT's BRepMesh"),
     )
@@ -142,8 +145,6 @@ KINDS: dict[str, JobKind] = {k.name: k for k in (
                 Param("target", "float", None, "adaptive: chordal error every refined triangle must reach (default: a "
                       "tenth of the chosen faces' worst)", "mm", gt=0, optional=True),
                 Param("compare", "bool", True, "Add uniform re-tessellations and the other method to the report"),
-                Param("max_triangles", "int", 10_000_000, "Refuse (output_too_large) a refinement predicted to output "
-                      "more triangles than this", ge=1, le=50_000_000),
             ) + _OUTPUT + _SERVICE,
             ("refined.stl", "refined.3mf"), "heavy", True, "STEP, IGES or BREP (with the STL to refine as `stl`)"),
 )}

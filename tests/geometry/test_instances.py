@@ -118,3 +118,53 @@ def test_instances_closed_outward_and_within_tolerance(tmp_path, how, tol):
     assert np.allclose(volumes, expected, rtol=0.02)
     assert _worst_distance(model, mesh, samples=500) <= tol * 1.001
     assert result.max_error <= tol * 1.001
+
+
+def test_instances_meshed_once_or_each_give_the_same_solids(tmp_path):
+    """The placed template (instances.py) against meshing every instance: both closed, outward, every solid's
+    volume the same to the tolerance's share."""
+    model, factors, part_volume, _ = _model("memory", tmp_path)
+    out = []
+    for once in (True, False):
+        mesh = mesh_model(model, MeshParams(tolerance=0.05, mesh_instances_once=once)).mesh
+        checks = check_mesh(mesh)
+        assert checks.closed and checks.inside_out_shells == 0
+        n, labels = shell_labels(mesh)
+        out.append(sorted(signed_volume(mesh.corners[labels == s]) for s in range(n)))
+    assert np.allclose(out[0], out[1], rtol=2e-3)
+
+
+def _boxes(levels: int):
+    """2**levels unit boxes: one box placed by nested compounds of two, each level a translation along x, y or z."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    shape = BRepPrimAPI_MakeBox(1, 1, 1).Shape()
+    for level in range(levels):
+        step = [0.0, 0.0, 0.0]
+        step[level % 3] = 2.0 ** (level // 3 + 1)
+        shape = _compound([shape, shape.Moved(TopLoc_Location(_moved(*step)), False)])
+    return shape
+
+
+def test_many_placed_boxes_are_meshed_once_and_placed(tmp_path):
+    """1,024 placed boxes from a BREP of a few KB (the CLI's path): one box meshed, 1,024 closed unit cubes out,
+    every face id and solid that of the whole assembly."""
+    from amprep.geometry.meshing.instances import find_instancing
+
+    path = tmp_path / "boxes.brep"
+    BRepTools.Write_s(_boxes(10), str(path))
+    assert path.stat().st_size < 10_000
+    model, result = mesh_file(path, "brep", MeshParams(tolerance=0.1))
+    inst = find_instancing(model)
+    assert inst is not None and len(inst.template.faces) == 6 and len(model.faces) == 6 * 1024
+    mesh = result.mesh
+    checks = check_mesh(mesh)
+    assert checks.closed and checks.triangles == 12 * 1024 and checks.inside_out_shells == 0
+    n, labels = shell_labels(mesh)
+    assert n == 1024
+    assert np.allclose([signed_volume(mesh.corners[labels == s]) for s in range(n)], 1.0)
+    # each face's triangles lie on that face of the assembly, by OCCT
+    assert _worst_distance(model, mesh, samples=300) < 1e-9
+    assert sorted(set(mesh.face_ids.tolist())) == list(range(6 * 1024))
+    solid_of_tri = np.array(model.face_solid)[mesh.face_ids]
+    assert all(len(set(solid_of_tri[labels == s].tolist())) == 1 for s in range(0, n, 97))

@@ -7,14 +7,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.core.limits import MIN_TOLERANCE
+from amprep.geometry.core.limits import DEFAULT_MAX_TRIANGLES, MIN_TOLERANCE
 
 
 @dataclass(frozen=True)
 class MeshParams:
     """Meshing parameters: `tolerance` mm (absolute chord deviation) or `relative` (fraction of the bounding-box
     diagonal, overrides tolerance), `angular` rad (the largest turn of one edge segment), `min_size` mm, `algorithm`
-    delabella | watson."""
+    delabella | watson, `max_triangles` the most the output may have by the estimate made before meshing."""
 
     tolerance: float = 0.1
     relative: float | None = None
@@ -28,6 +28,8 @@ class MeshParams:
     occt_edges: bool = False  # every edge at half the tolerance and angle, as BRepMesh does (brepmesh.py)
     own_large_faces: bool = True  # mesh large torus faces ourselves, not with BRepMesh (own_faces.py)
     occt_surface_control: bool = False  # OCCT's own deflection check of face interiors (ours replaces it)
+    max_triangles: int = DEFAULT_MAX_TRIANGLES  # refuse (output_too_large) a model estimated to mesh to more
+    mesh_instances_once: bool = True  # an assembly of placed copies of fewer solids: mesh each once (instances.py)
 
     def validate(self) -> None:
         """Raise invalid_parameter for values no mesher can honour."""
@@ -44,5 +46,7 @@ class MeshParams:
             bad = f"algorithm must be delabella or watson, got {self.algorithm}"
         elif not (1 <= self.check_order <= 30):
             bad = f"check order must be 1..30, got {self.check_order}"
+        elif not (isinstance(self.max_triangles, int) and self.max_triangles >= 1):
+            bad = f"max triangles must be an integer ≥ 1, got {self.max_triangles}"
         if bad:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, bad)

@@ -7,7 +7,7 @@ every face (occt_check.py), enforce the tolerance on every face (enforce.py) and
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,7 @@ from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.chordal import load_kernels, worth_compiling
 from amprep.geometry.meshing.enforce import FaceStates, enforce_tolerance
+from amprep.geometry.meshing.instances import Instancing, expand_mesh, template_face_of
 from amprep.geometry.meshing.occt_check import first_look
 from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arrays
 from amprep.geometry.meshing.params import MeshParams
@@ -34,13 +35,15 @@ from amprep.geometry.meshing.weld import orient_stored_shells, weld
 @dataclass(frozen=True, eq=False)
 class MeshResult:
     """The welded mesh and how it was made: `face_error` (F,) max chordal error per face (nan: no surface),
-    `tolerance` the absolute tolerance used, `fallback_faces` ids meshed by our own mesher, and why."""
+    `tolerance` the absolute tolerance used, `fallback_faces` ids meshed by our own mesher, and why,
+    `estimated_triangles` the count expected from the B-rep before meshing (estimate.py)."""
 
     mesh: Mesh
     tolerance: float
     face_error: np.ndarray
     fallback_faces: dict[int, str]
     unmeshed_faces: tuple[int, ...]
+    estimated_triangles: int = 0
 
     @property
     def max_error(self) -> float:
@@ -69,7 +72,28 @@ def mesh_model(model: CadModel, params: MeshParams = MeshParams(), progress: Pro
 
 
 def mesh_prepared(prepared: Prepared, params: MeshParams, progress: ProgressFn | None) -> MeshResult:
-    """mesh_model's work after prepare(): OCCT's face meshes read and checked, the tolerance enforced, the welding."""
+    """mesh_model's work after prepare(): OCCT's face meshes read and checked, the tolerance enforced, the welding;
+    with instancing, on the distinct solids, then placed (instances.py)."""
+    inst = prepared.instancing
+    if inst is None:
+        return _mesh_whole(prepared, params, progress)
+    part = _mesh_whole(replace(prepared, model=inst.template, instancing=None), params, progress)
+    return _placed(part, inst, prepared.model)
+
+
+def _placed(part: MeshResult, inst: Instancing, model: CadModel) -> MeshResult:
+    """The MeshResult of the whole model from its template's (instances.py)."""
+    tf = template_face_of(inst)
+    infos = tuple(FaceInfo(f, part.mesh.faces[t].surface_type, model.face_solid[f], part.mesh.faces[t].meshed_by)
+                  for f, t in enumerate(tf.tolist()))
+    fallback = {f: part.fallback_faces[t] for f in np.flatnonzero(np.isin(tf, list(part.fallback_faces))).tolist()
+                for t in (int(tf[f]),)}
+    unmeshed = tuple(np.flatnonzero(np.isin(tf, list(part.unmeshed_faces))).tolist())
+    return MeshResult(expand_mesh(inst, part.mesh, infos), part.tolerance, part.face_error[tf], fallback, unmeshed,
+                      part.estimated_triangles)
+
+
+def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | None) -> MeshResult:
     prog = Progress(progress)
     prog("meshing", 0.4)
     model, tol = prepared.model, prepared.tolerance
@@ -109,7 +133,7 @@ def mesh_prepared(prepared: Prepared, params: MeshParams, progress: ProgressFn |
     mesh = orient_stored_shells(weld([p for p in patches if p is not None], infos, topo.vertex_roots()))
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
-    return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))))
+    return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))), prepared.estimated)
 
 
 def _compiled_for(bulk: list, surfaces: list[Surface | None], order: int) -> bool:  # type: ignore[type-arg]

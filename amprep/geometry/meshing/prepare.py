@@ -5,8 +5,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
+from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.meshing.brepmesh import run_brepmesh
+from amprep.geometry.meshing.estimate import estimate_triangles
+from amprep.geometry.meshing.instances import Instancing, find_instancing, template_face_of
 from amprep.geometry.meshing.large_faces import faces_to_mesh_ourselves
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.tolerance import absolute_tolerance
@@ -15,11 +20,34 @@ from amprep.geometry.meshing.tolerance import absolute_tolerance
 @dataclass(frozen=True, eq=False)
 class Prepared:
     """A model whose shape BRepMesh meshed at `tolerance` (mm, absolute), all faces but `own` (ids left to our own
-    mesher, large_faces.py)."""
+    mesher, large_faces.py); `estimated` the triangles estimate.py expected. With `instancing` (instances.py) only
+    its template was meshed, and `own` are template face ids."""
 
     model: CadModel
     tolerance: float
     own: tuple[int, ...]
+    estimated: int = 0
+    instancing: Instancing | None = None
+
+    @property
+    def meshed(self) -> CadModel:
+        """The model BRepMesh meshed: the instancing's template, or the model."""
+        return self.instancing.template if self.instancing is not None else self.model
+
+
+def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Instancing | None = None) -> int:
+    """The model's estimated triangle count (estimate.py; with `inst`, its template's faces counted once per
+    placement); output_too_large, before any meshing, when it exceeds params.max_triangles."""
+    if inst is None:
+        n = estimate_triangles(model, tol, params.angular)
+    else:
+        uses = np.bincount(template_face_of(inst), minlength=len(inst.template.faces))
+        n = estimate_triangles(inst.template, tol, params.angular, uses)
+    if n > params.max_triangles:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm this model would mesh to about {n:,} triangles, "
+                          f"over the limit of {params.max_triangles:,}: use a coarser tolerance or a higher "
+                          "max_triangles (the estimate is made from the B-rep before meshing)")
+    return n
 
 
 def own_faces(model: CadModel, params: MeshParams, tol: float) -> list[int]:
@@ -30,8 +58,12 @@ def own_faces(model: CadModel, params: MeshParams, tol: float) -> list[int]:
 
 
 def prepare(model: CadModel, params: MeshParams) -> Prepared:
-    """The model's absolute tolerance and own faces, after run_brepmesh meshed every other face at that tolerance."""
+    """The model's absolute tolerance, its size checked (refuse_too_large) and its own faces, after run_brepmesh
+    meshed every other face at that tolerance (only the distinct solids when instances.py finds instancing)."""
     tol = absolute_tolerance(model, params)
-    own = own_faces(model, params, tol)
-    run_brepmesh(model.shape, tol, params, [model.faces[i] for i in own])
-    return Prepared(model, tol, tuple(own))
+    inst = find_instancing(model) if params.mesh_instances_once else None
+    estimated = refuse_too_large(model, params, tol, inst)
+    meshed = inst.template if inst is not None else model
+    own = own_faces(meshed, params, tol)
+    run_brepmesh(meshed.shape, tol, params, [meshed.faces[i] for i in own])
+    return Prepared(model, tol, tuple(own), estimated, inst)

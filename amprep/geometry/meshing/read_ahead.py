@@ -18,6 +18,7 @@ from amprep.geometry.cad.read import model_from_shape, read_cad
 from amprep.geometry.core.progress import ProgressFn
 from amprep.geometry.measure.chordal import kernels_loaded, warm_kernels
 from amprep.geometry.meshing.brepmesh import occt_pool_untouched
+from amprep.geometry.meshing.instances import find_instancing
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import Prepared, prepare
 from amprep.geometry.parallel.forked import Forked, fork_available
@@ -45,20 +46,27 @@ def read_and_prepare(path: str | Path, fmt: str, params: MeshParams) -> Prepared
     return _received(_child(str(path), fmt, params), fmt)
 
 
-def _child(path: str, fmt: str, params: MeshParams) -> tuple[bytes, str, bool, float, tuple[int, ...]]:
+_Sent = tuple[bytes, str, bool, float, tuple[int, ...], int, bool]
+
+
+def _child(path: str, fmt: str, params: MeshParams) -> _Sent:
     p = prepare(read_cad(path, fmt), params)
     buf = io.BytesIO()
     BinTools.Write_s(p.model.shape, buf, True, False, BinTools_FormatVersion.BinTools_FormatVersion_VERSION_3)
-    return buf.getvalue(), p.model.units, p.model.sewn, p.tolerance, p.own
+    return buf.getvalue(), p.model.units, p.model.sewn, p.tolerance, p.own, p.estimated, p.instancing is not None
 
 
-def _received(sent: tuple[bytes, str, bool, float, tuple[int, ...]], fmt: str) -> Prepared:
-    data, units, sewn, tol, own = sent
+def _received(sent: _Sent, fmt: str) -> Prepared:
+    """The Prepared the child made, from its BREP: the instancing is found again on the received shape (the same
+    solids; instances share their faces' triangulations, so every placement arrives meshed)."""
+    data, units, sewn, tol, own, estimated, instanced = sent
     shape = TopoDS_Shape()
     BinTools.Read_s(shape, io.BytesIO(data))
     if shape.IsNull():
         raise AmprepError(ErrorCode.MESHING_FAILED, "the meshed shape did not come back from the reading process")
-    return Prepared(model_from_shape(shape, fmt, units, sewn), tol, own)
+    model = model_from_shape(shape, fmt, units, sewn)
+    inst = find_instancing(model) if instanced else None
+    return Prepared(model, tol, own if inst is not None or not instanced else (), estimated, inst)
 
 
 def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams,

@@ -13,7 +13,7 @@ import signal
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
 
-from amprep.errors import AmprepError, ErrorCode
+from amprep.errors import AmprepError, ErrorCode, out_of_memory
 
 T = TypeVar("T")
 
@@ -36,7 +36,8 @@ class Forked(Generic[T]):
     """fn(*args) started in a forked child (inline at result() when fork_available() is False or `fork` is False;
     with `isolate`, forked wherever os.fork exists, one core or a daemonic worker too: for a crash to end the child).
     The child must only read what it inherits: its changes to the caller's objects are lost. An AmprepError in the
-    child is raised again by result(); any other exception or a dead child raises `died` (code, message)."""
+    child is raised again by result(), a failed allocation as memory_limit; any other exception or a dead child
+    raises `died` (code, message)."""
 
     def __init__(self, fn: Callable[..., T], *args: Any, died: tuple[ErrorCode, str] = (
             ErrorCode.INTERNAL_ERROR, "a helper process died"), fork: bool = True, isolate: bool = False) -> None:
@@ -66,8 +67,9 @@ class Forked(Generic[T]):
                     out: tuple[str, Any] = ("ok", self._fn(*self._args))
                 except AmprepError as exc:
                     out = ("amprep", (exc.code.value, exc.message))
-                except BaseException as exc:  # noqa: BLE001 - reported to the parent as `died`
-                    out = ("died", f"{type(exc).__name__}: {exc}")
+                except BaseException as exc:  # noqa: BLE001 - below: reported to the parent
+                    out = (("amprep", (ErrorCode.MEMORY_LIMIT.value, f"out of memory ({type(exc).__name__})"))
+                           if out_of_memory(exc) else ("died", f"{type(exc).__name__}: {exc}"))
                 data = pickle.dumps(out, protocol=pickle.HIGHEST_PROTOCOL)
                 with os.fdopen(write, "wb") as fh:
                     fh.write(data)
