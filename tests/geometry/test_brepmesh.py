@@ -8,10 +8,11 @@ from OCP.GeomAbs import GeomAbs_Circle
 from OCP.TopLoc import TopLoc_Location
 
 from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.cad.surfaces import is_ruled
 from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
 from amprep.geometry.meshing import brepmesh
-from amprep.geometry.meshing.brepmesh import EDGE_TARGET, is_ruled, run_brepmesh
+from amprep.geometry.meshing.brepmesh import EDGE_TARGET, run_brepmesh
 from amprep.geometry.meshing.occt_read import triangulation_arrays
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model

@@ -1,4 +1,4 @@
-"""The triangle count estimated from the B-rep before meshing (meshing/estimate.py) against the count the mesher
+"""The triangle count estimated from the B-rep before meshing (cad/estimate.py) against the count the mesher
 then gives, on the corpus; a model estimated over max_triangles is refused before BRepMesh runs."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from OCP.BRepTools import BRepTools
 from OCP.TopLoc import TopLoc_Location
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.estimate import estimate_triangles
 from amprep.geometry.cad.read import model_from_shape, read_cad
-from amprep.geometry.meshing.estimate import estimate_triangles
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 from tests.conftest import CAD_FILES, corpus

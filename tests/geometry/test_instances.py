@@ -149,7 +149,7 @@ def _boxes(levels: int):
 def test_many_placed_boxes_are_meshed_once_and_placed(tmp_path):
     """1,024 placed boxes from a BREP of a few KB (the CLI's path): one box meshed, 1,024 closed unit cubes out,
     every face id and solid that of the whole assembly."""
-    from amprep.geometry.meshing.instances import find_instancing
+    from amprep.geometry.cad.instances import find_instancing
 
     path = tmp_path / "boxes.brep"
     BRepTools.Write_s(_boxes(10), str(path))

@@ -7,6 +7,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,15 +62,16 @@ class Service:
         return url, proc
 
 
-@pytest.fixture(scope="session")
-def service(tmp_path_factory: pytest.TempPathFactory):
-    data = tmp_path_factory.mktemp("amprep-data")
-    logs = tmp_path_factory.mktemp("logs")
+@contextmanager
+def running_service(data: Path, logs: Path, **extra: str) -> Iterator[Service]:
+    """A Redis server, a job worker (one process for both queues), a callback worker and an API on them, with the
+    environment `extra` added; all stopped after."""
     redis_proc, redis_url = start_redis(data)
     env = dict(os.environ, AMPREP_REDIS_URL=redis_url, AMPREP_DATA_DIR=str(data), AMPREP_CALLBACK_SECRET=SECRET,
                AMPREP_MAX_JOBS_PER_PROCESS="50", PYTHONUNBUFFERED="1",
                AMPREP_CALLBACK_ALLOW="127.0.0.1")  # the tests' callback receivers listen on loopback
     env.pop("AMPREP_API_KEYS", None)
+    env.update(extra)
     # One process per queue: a test can tell which process runs its job and kill it.
     worker = _spawn([sys.executable, "-m", "celery", "-A", "workers.celery_app", "worker", "-Q", "quick,heavy",
                      "-c", "1", "-n", "test@%h", "--without-gossip", "--without-mingle", "-O", "fair"],
@@ -91,6 +94,17 @@ def service(tmp_path_factory: pytest.TempPathFactory):
             _stop(p)
         redis_proc.terminate()
         redis_proc.wait(10)
+
+
+#: the shared service's cap on any job's output (a torus at 0.0001 mm is estimated over it)
+MAX_TRIANGLES = 1_000_000
+
+
+@pytest.fixture(scope="session")
+def service(tmp_path_factory: pytest.TempPathFactory):
+    with running_service(tmp_path_factory.mktemp("amprep-data"), tmp_path_factory.mktemp("logs"),
+                         AMPREP_MAX_TRIANGLES=str(MAX_TRIANGLES)) as svc:
+        yield svc
 
 
 @pytest.fixture(scope="session")

@@ -208,3 +208,19 @@ def _swept(ad: BRepAdaptor_Surface, kind) -> Callable[[np.ndarray], np.ndarray] 
     if not np.abs(got - want).max() <= 1e-9 * (1.0 + np.abs(want).max()):
         return None
     return f
+
+
+RULED_TYPES = (GeomAbs_Plane, GeomAbs_Cylinder, GeomAbs_Cone, GeomAbs_SurfaceOfExtrusion)
+
+
+def is_ruled(face: TopoDS_Face) -> bool:
+    """True for a plane, cylinder, cone, extrusion, or a B-spline or Bézier surface of degree 1 with 2 poles in u or
+    v: straight through every point one way, so a triangle between two rulings deviates from the surface about as
+    much as its chord across them, which the boundary edges' discretisation sets."""
+    s = BRepAdaptor_Surface(face, False)
+    kind = s.GetType()
+    if kind in RULED_TYPES:
+        return True
+    if kind in (GeomAbs_BSplineSurface, GeomAbs_BezierSurface):
+        return (s.UDegree() == 1 and s.NbUPoles() == 2) or (s.VDegree() == 1 and s.NbVPoles() == 2)
+    return False

@@ -19,17 +19,8 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from OCP.BRepAdaptor import BRepAdaptor_Surface
 from OCP.BRepMesh import BRepMesh_IncrementalMesh
 from OCP.BRepTools import BRepTools
-from OCP.GeomAbs import (
-    GeomAbs_BezierSurface,
-    GeomAbs_BSplineSurface,
-    GeomAbs_Cone,
-    GeomAbs_Cylinder,
-    GeomAbs_Plane,
-    GeomAbs_SurfaceOfExtrusion,
-)
 from OCP.IMeshTools import (
     IMeshTools_MeshAlgoType_Delabella,
     IMeshTools_MeshAlgoType_Watson,
@@ -39,6 +30,7 @@ from OCP.TopAbs import TopAbs_FACE
 from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
+from amprep.geometry.cad.surfaces import is_ruled
 from amprep.geometry.cad.topology import compound, explore
 from amprep.geometry.meshing.params import MeshParams
 
@@ -48,7 +40,6 @@ EDGE_TARGET = 0.95
 #: BRepMesh discretises edges at this × the deflection and the angle it is given (BRepMesh_CurveTessellator)
 OCCT_EDGE_FACTOR = 0.5
 
-_RULED_TYPES = (GeomAbs_Plane, GeomAbs_Cylinder, GeomAbs_Cone, GeomAbs_SurfaceOfExtrusion)
 
 _pool_started = False  # True once this process ran BRepMesh in parallel (OCCT's thread pool then has threads)
 
@@ -58,19 +49,6 @@ def occt_pool_untouched() -> bool:
     cadquery imported): a forked child may then start OCCT's thread pool itself. After a fork the pool's threads
     of the parent are gone but its state says they exist, and a parallel BRepMesh in the child waits for ever."""
     return not _pool_started and "cadquery" not in sys.modules
-
-
-def is_ruled(face: TopoDS_Face) -> bool:
-    """True for a plane, cylinder, cone, extrusion, or a B-spline or Bézier surface of degree 1 with 2 poles in u or
-    v: straight through every point one way, so a triangle between two rulings deviates from the surface about as
-    much as its chord across them, which the boundary edges' discretisation sets."""
-    s = BRepAdaptor_Surface(face, False)
-    kind = s.GetType()
-    if kind in _RULED_TYPES:
-        return True
-    if kind in (GeomAbs_BSplineSurface, GeomAbs_BezierSurface):
-        return (s.UDegree() == 1 and s.NbUPoles() == 2) or (s.VDegree() == 1 and s.NbVPoles() == 2)
-    return False
 
 
 def run_brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams,

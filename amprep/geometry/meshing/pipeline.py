@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from OCP.BRep import BRep_Tool
 
+from amprep.geometry.cad.instances import Instancing, expand_mesh, template_face_of
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface, surface_of
 from amprep.geometry.cad.topology import Topology
@@ -22,7 +23,6 @@ from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.chordal import load_kernels, worth_compiling
 from amprep.geometry.meshing.enforce import FaceStates, enforce_tolerance
-from amprep.geometry.meshing.instances import Instancing, expand_mesh, template_face_of
 from amprep.geometry.meshing.occt_check import first_look
 from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arrays
 from amprep.geometry.meshing.params import MeshParams

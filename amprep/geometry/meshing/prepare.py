@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.estimate import estimate_triangles
+from amprep.geometry.cad.instances import Instancing, find_instancing, template_face_of
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.meshing.brepmesh import run_brepmesh
-from amprep.geometry.meshing.estimate import estimate_triangles
-from amprep.geometry.meshing.instances import Instancing, find_instancing, template_face_of
 from amprep.geometry.meshing.large_faces import faces_to_mesh_ourselves
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.tolerance import absolute_tolerance

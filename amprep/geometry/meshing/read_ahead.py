@@ -14,11 +14,11 @@ from OCP.BinTools import BinTools, BinTools_FormatVersion
 from OCP.TopoDS import TopoDS_Shape
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.instances import find_instancing
 from amprep.geometry.cad.read import model_from_shape, read_cad
 from amprep.geometry.core.progress import ProgressFn
 from amprep.geometry.measure.chordal import kernels_loaded, warm_kernels
 from amprep.geometry.meshing.brepmesh import occt_pool_untouched
-from amprep.geometry.meshing.instances import find_instancing
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import Prepared, prepare
 from amprep.geometry.parallel.forked import Forked, fork_available

@@ -71,6 +71,33 @@ def principal_frames(points: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+#: points of the sample that score a start and set ICP's trimming distance (its median nearest distance)
+SCORE_POINTS = 2_000
+
+
+#: ICP rounds on the whole sample after the coarse ones (the fit to the exact surfaces follows in place.py)
+FINE_ROUNDS = 8
+
+
+def _icp(tree: cKDTree, cad_points: np.ndarray, pts: np.ndarray, R: np.ndarray, t: np.ndarray, reach: float,
+         inlier_distance: float, rounds: int) -> tuple[np.ndarray, np.ndarray]:
+    """Trimmed ICP of (n, 3) points onto the cloud from (R, t): matches within max(3 × the median nearest distance of
+    the first SCORE_POINTS, inlier_distance), each query bounded; stops when a round moves by < 1e-12."""
+    for _ in range(rounds):
+        moved = pts @ R.T + t
+        near, _ = tree.query(moved[:SCORE_POINTS], distance_upper_bound=reach)
+        trim = max(3 * float(np.median(np.minimum(near, reach))), inlier_distance)
+        d, idx = tree.query(moved, distance_upper_bound=trim)
+        keep = np.isfinite(d)
+        if keep.sum() < 3:
+            break
+        dR, dt = kabsch(moved[keep], cad_points[idx[keep]])
+        R, t = dR @ R, dR @ t + dt
+        if np.abs(dR - np.eye(3)).max() < 1e-12 and np.linalg.norm(dt) < 1e-12:
+            break
+    return R, t
+
+
 def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float, stl_cloud: np.ndarray | None = None,
           min_inliers: float = 0.6, iterations: int = 40, sample: int = 20_000,
           rng: np.random.Generator | None = None) -> Alignment:
@@ -78,7 +105,8 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
     bounding-box centres (STLs turned into print orientation) and the 4 matchings of principal axes about the
     centroids (any other rotation); each is scored by the median nearest distance, the best few are refined by
     trimmed ICP (points within 3× the median distance, so regions where the STL differs from the CAD do not pull
-    the fit).
+    the fit). Every k-d tree query is bounded (10 % of the CAD's diagonal for scores, the trimming distance in
+    ICP), so alignment costs seconds however far the STL starts and however large the part.
     rms and max are over the inliers (points within inlier_distance). stl_cloud: points spread evenly over the STL
     (for the principal axes; default its vertices). Fewer than min_inliers of the points on the CAD: the STL does
     not belong to it, AmprepError(stl_mismatch)."""
@@ -98,23 +126,21 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
     for f_stl in principal_frames(even):
         R = f_cad.T @ f_stl
         starts.append(("principal axes", R, m_cad - R @ m_stl))
+    # a k-d tree query far from the cloud visits most of the tree: every query is bounded (a miss is inf), so a
+    # far-off start costs what a near one does, whatever the part's size
+    reach = 0.1 * float(np.linalg.norm(np.ptp(cad_points, axis=0))) + inlier_distance
     scored = []
     for name, R, t in starts:
-        d, _ = tree.query(probe @ R.T + t)
-        scored.append((float(np.median(d)), name, R, t))
+        d, _ = tree.query(probe[:SCORE_POINTS] @ R.T + t, distance_upper_bound=reach)
+        scored.append((float(np.median(np.minimum(d, reach))), name, R, t))
     scored.sort(key=lambda s: s[0])
     best, best_key = None, (0.0, 0.0, 0.0)
     for _, name, R, t in scored[:4]:  # symmetric parts: refine the few best starts, keep the best fit
-        for _ in range(iterations):
-            moved = pts @ R.T + t
-            d, idx = tree.query(moved)
-            keep = d <= max(3 * np.median(d), inlier_distance)
-            dR, dt = kabsch(moved[keep], cad_points[idx[keep]])
-            R, t = dR @ R, dR @ t + dt
-            if np.abs(dR - np.eye(3)).max() < 1e-12 and np.linalg.norm(dt) < 1e-12:
-                break
-        d, _ = tree.query(stl_points @ R.T + t)
-        inl = d <= inlier_distance
+        # coarse to fine: ICP on the scoring points until it settles, then a few rounds on the whole sample
+        for cloud, rounds in ((pts[:SCORE_POINTS], iterations), (pts, FINE_ROUNDS)):
+            R, t = _icp(tree, cad_points, cloud, R, t, reach, inlier_distance, rounds)
+        d, _ = tree.query(stl_points @ R.T + t, distance_upper_bound=inlier_distance * (1 + 1e-12))
+        inl = np.isfinite(d)
         fit = Alignment(R, t, float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf"),
                         float(d[inl].max(initial=0.0)), name, float(inl.mean()))
         # a symmetric part fits several ways equally well: prefer the smallest rotation among equal fits

@@ -27,8 +27,8 @@ from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
 from amprep.geometry.cad.read import CadModel
+from amprep.geometry.cad.surfaces import is_ruled
 from amprep.geometry.cad.topology import explore
-from amprep.geometry.meshing.brepmesh import is_ruled
 
 #: samples of a free-form edge's or face's curvature, per parameter direction
 SAMPLES = 5
