@@ -56,12 +56,14 @@ def check_bind(host: str, has_keys: bool, allow_insecure: bool) -> None:
                           "and read every result. Set AMPREP_API_KEYS (see `amprep key`) or bind to 127.0.0.1")
 
 
-def start_redis(data: Path, binary: str | None = None) -> tuple[subprocess.Popen, str]:  # type: ignore[type-arg]
-    """A private redis-server on a free loopback port, persisting to data/redis with its append-only file."""
+def start_redis(data: Path, binary: str | None = None,
+                port: int | None = None) -> tuple[subprocess.Popen, str]:  # type: ignore[type-arg]
+    """A private redis-server on a free loopback port (or `port`: a restart), persisting to data/redis with its
+    append-only file."""
     exe = binary or redis_server_binary()[0]
     rdir = data / "redis"
     rdir.mkdir(parents=True, exist_ok=True)
-    port = free_port()
+    port = port or free_port()
     proc = subprocess.Popen(
         [exe, "--port", str(port), "--bind", "127.0.0.1", "--dir", str(rdir), "--appendonly", "yes",
          "--appendfsync", "everysec", "--save", "", "--daemonize", "no", "--loglevel", "warning",

@@ -9,7 +9,9 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from redis.exceptions import RedisError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match, Route
 
 from amprep.errors import AmprepError, ErrorCode
 
@@ -25,15 +27,31 @@ class ApiError(Exception):
         self.status, self.code, self.detail, self.extra = status, str(code), detail, extra
 
 
-def problem(status: int, code: str, detail: str, instance: str | None = None, **extra: Any) -> JSONResponse:
+def problem(status: int, code: str, detail: str, instance: str | None = None,
+            headers: dict[str, str] | None = None, **extra: Any) -> JSONResponse:
+    """An RFC 9457 problem+json response (`headers`: more headers, e.g. a 405's Allow)."""
     body = {"type": "about:blank", "title": HTTPStatus(status).phrase, "status": status, "detail": detail,
             "code": code, "instance": instance} | {k: v for k, v in extra.items() if v is not None}
-    headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
-    return JSONResponse(body, status_code=status, media_type=MEDIA_TYPE, headers=headers)
+    headers = dict(headers or {}) | ({"WWW-Authenticate": "Bearer"} if status == 401 else {})
+    return JSONResponse(body, status_code=status, media_type=MEDIA_TYPE, headers=headers or None)
 
 
 _CODE_OF_STATUS = {404: ErrorCode.NOT_FOUND, 405: ErrorCode.INVALID_REQUEST, 413: ErrorCode.UPLOAD_TOO_LARGE,
                    401: ErrorCode.UNAUTHORIZED, 406: ErrorCode.NOT_ACCEPTABLE}
+
+
+#: seconds a client is asked to wait before retrying a 503
+RETRY_AFTER = 5
+
+
+def allowed_methods(request: Request) -> str:
+    """The Allow header of a 405: every method of every route whose path matches (Starlette names only the first
+    route's, and GET and POST /v1/jobs are two routes)."""
+    methods: set[str] = set()
+    for route in request.app.router.routes:
+        if isinstance(route, Route) and route.methods and route.matches(request.scope)[0] != Match.NONE:
+            methods |= route.methods
+    return ", ".join(sorted(methods))
 
 
 def install(app: FastAPI) -> None:
@@ -41,7 +59,8 @@ def install(app: FastAPI) -> None:
 
     @app.exception_handler(ApiError)
     async def _api(request: Request, exc: ApiError) -> JSONResponse:
-        return problem(exc.status, exc.code, exc.detail, request.url.path, **exc.extra)
+        headers = {"Retry-After": str(RETRY_AFTER)} if exc.status == 503 else None
+        return problem(exc.status, exc.code, exc.detail, request.url.path, headers=headers, **exc.extra)
 
     @app.exception_handler(AmprepError)
     async def _amprep(request: Request, exc: AmprepError) -> JSONResponse:
@@ -58,7 +77,16 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         code = _CODE_OF_STATUS.get(exc.status_code, ErrorCode.INVALID_REQUEST)
-        return problem(exc.status_code, code.value, str(exc.detail), request.url.path)
+        headers = dict(exc.headers or {})
+        if exc.status_code == 405:
+            headers["Allow"] = allowed_methods(request)
+        return problem(exc.status_code, code.value, str(exc.detail), request.url.path, headers=headers)
+
+    @app.exception_handler(RedisError)
+    async def _redis(request: Request, exc: RedisError) -> JSONResponse:
+        log.warning("redis unavailable on %s: %s", request.url.path, type(exc).__name__)
+        return problem(503, ErrorCode.UNAVAILABLE.value, f"the job store is unreachable ({type(exc).__name__}): "
+                       "retry later", request.url.path, headers={"Retry-After": str(RETRY_AFTER)})
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import base64
 import json
-import math
 from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, Header, Query, Request, UploadFile
@@ -29,8 +27,10 @@ router = APIRouter(prefix="/v1", tags=["jobs"])
 
 PROBLEMS: dict[int | str, dict[str, Any]] = {
     s: {"model": Problem, "content": {"application/problem+json": {}}, "description": d}
-    for s, d in [(401, "Missing or invalid API key"), (404, "No such job (or not yours)"),
-                 (422, "Invalid request or input: see `code`")]
+    for s, d in [(400, "A body that is not well-formed (e.g. broken multipart)"),
+                 (401, "Missing or invalid API key"), (404, "No such job (or not yours)"),
+                 (422, "Invalid request or input: see `code`"),
+                 (503, "Redis or the queue is unreachable (code unavailable): retry after Retry-After seconds")]
 }
 JOB_EXAMPLE = JobPublic.model_config["json_schema_extra"]["examples"][0]  # type: ignore[index]
 
@@ -123,7 +123,8 @@ async def create_job(
     params: Annotated[str, Form(description="JSON object of the kind's params (unknown keys are an error): "
                                 "ConvertParams, AnalyzeParams or RefineParams",
                                 examples=['{"tolerance": 0.05}'])] = "{}",
-    stl: Annotated[UploadFile | None, File(description="An STL made elsewhere, scored/refined against `file`")] = None,
+    # typed without None so the schema says "a file, or absent" (a null part is not a file)
+    stl: Annotated[UploadFile, File(description="An STL made elsewhere, scored/refined against `file`")] = None,  # type: ignore[assignment]
     wait: Annotated[float, Query(ge=0, le=3600, description="Hold the request up to this many seconds for the end")] = 0,
     idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", max_length=255,
                                                   description="The same key returns the same job")] = None,
@@ -190,25 +191,19 @@ async def get_job(job_id: str, request: Request, store: StoreDep, owner: OwnerDe
     return _job_response(_own(store, job_id, owner), request, status_code=200)
 
 
-def _cursor_decode(cursor: str | None) -> float | None:
-    if not cursor:
-        return None
-    try:
-        value = float(base64.urlsafe_b64decode(cursor.encode()).decode())
-    except Exception:
-        value = math.nan
-    if not math.isfinite(value):
-        raise ApiError(422, ErrorCode.INVALID_REQUEST, "cursor: not a cursor this server gave")
-    return value
+#: a cursor is the created_at (Unix seconds, Python's shortest exact repr) of the previous page's last job: any
+#: string of this form is a valid cursor, and none is non-finite
+CURSOR = r"^[0-9]{1,12}(\.[0-9]{1,20})?$"
 
 
 @router.get("/jobs", operation_id="list_jobs", response_model=JobList, summary="Your jobs, newest first",
             responses=PROBLEMS)
 async def list_jobs(store: StoreDep, owner: OwnerDep, status: Status | None = None, kind: Kind | None = None,
-                    cursor: Annotated[str | None, Query(description="next_cursor of the previous page")] = None,
+                    cursor: Annotated[str | None, Query(description="next_cursor of the previous page",
+                                                        pattern=CURSOR, max_length=40)] = None,
                     limit: Annotated[int, Query(ge=1, le=200)] = 50) -> JobList:
-    jobs, nxt = store.list(owner, status, kind, _cursor_decode(cursor), limit)
-    next_cursor = base64.urlsafe_b64encode(repr(nxt).encode()).decode() if nxt is not None else None
+    jobs, nxt = store.list(owner, status, kind, float(cursor) if cursor else None, limit)
+    next_cursor = repr(float(nxt)) if nxt is not None else None
     return JobList(jobs=[JobPublic.model_validate(j.public()) for j in jobs], next_cursor=next_cursor)
 
 

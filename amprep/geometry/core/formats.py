@@ -18,7 +18,7 @@ def sniff_bytes(head: bytes, size: int) -> str:
     """
     if size == 0 or not head.strip():
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the file is empty")
-    if size >= 84:
+    if size >= 84 and len(head) >= 84:  # a head shorter than the size says cannot hold the count
         (n,) = struct.unpack_from("<I", head, 80)
         if 84 + 50 * n == size and n > 0:
             return "stl"
