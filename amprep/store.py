@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 import redis
+from redis.backoff import ExponentialBackoff
+from redis.retry import Retry
 
 P = "amprep:"
 STATUSES = ("queued", "running", "succeeded", "failed", "cancelled")
@@ -136,14 +138,39 @@ class Job:
         return QUEUE_OF_KIND[self.kind]
 
 
+def _retries_within(patience: float, base: float = 0.05, cap: float = 1.0) -> int:
+    """The most retries whose backoffs min(cap, base·2^i) add up to at most `patience` seconds (at least 1)."""
+    n, spent = 0, 0.0
+    while spent + min(cap, base * 2**n) <= patience:
+        spent += min(cap, base * 2**n)
+        n += 1
+    return max(1, n)
+
+
+# SET key new IF it holds old (compare and set), keeping a TTL
+_REBIND = """
+if redis.call('GET', KEYS[1]) == ARGV[1] then
+  redis.call('SET', KEYS[1], ARGV[2], 'EX', tonumber(ARGV[3]))
+  return 1
+end
+return 0
+"""
+
+
 class JobStore:
     """Job records (Redis) and artifact files (a directory) behind one small API; safe across processes."""
 
-    def __init__(self, redis_url: str, data_dir: str | Path, retention_seconds: int = 7 * 24 * 3600) -> None:
-        self.redis = redis.Redis.from_url(redis_url, decode_responses=True, health_check_interval=30)
+    def __init__(self, redis_url: str, data_dir: str | Path, retention_seconds: int = 7 * 24 * 3600,
+                 patience: float = 0.5) -> None:
+        """`patience`: seconds a command is retried while Redis does not answer (a restart): short for the API,
+        which answers 503 with Retry-After, long for a worker, whose job must not be lost to a blip."""
+        retry = Retry(ExponentialBackoff(cap=1.0, base=0.05), retries=_retries_within(patience))
+        self.redis = redis.Redis.from_url(redis_url, decode_responses=True, health_check_interval=30, retry=retry,
+                                          retry_on_error=[redis.ConnectionError, redis.TimeoutError])
         self.root = Path(data_dir) / "jobs"
         self.retention = retention_seconds
         self._transition = self.redis.register_script(_TRANSITION)
+        self._rebind = self.redis.register_script(_REBIND)
 
     # -- records ---------------------------------------------------------------------------------------------
     def key(self, job_id: str) -> str:
@@ -233,12 +260,27 @@ class JobStore:
         shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
 
     # -- idempotency and reuse ------------------------------------------------------------------------------
+    def _idem(self, owner: str, key: str) -> str:
+        return f"{P}idem:{owner}:{hashlib.sha256(key.encode()).hexdigest()}"
+
     def claim_idempotency(self, owner: str, key: str, job_id: str) -> str | None:
         """Bind `key` to `job_id` unless already bound: None if claimed, else the job id it names."""
-        k = f"{P}idem:{owner}:{hashlib.sha256(key.encode()).hexdigest()}"
+        k = self._idem(owner, key)
         if self.redis.set(k, job_id, nx=True, ex=self.retention):
             return None
         return self.redis.get(k)
+
+    def rebind_idempotency(self, owner: str, key: str, stale: str, job_id: str) -> bool:
+        """Bind `key` to `job_id` if it still names `stale` (a job whose record was never written: Redis went away
+        between the claim and the record); False when another request rebound it first."""
+        return bool(self._rebind(keys=[self._idem(owner, key)], args=[stale, job_id, self.retention]))
+
+    def mark_sent(self, job_id: str) -> None:
+        """Record that the job's task reached the broker."""
+        self.redis.hset(self.key(job_id), "sent", "1")
+
+    def was_sent(self, job_id: str) -> bool:
+        return self.redis.hget(self.key(job_id), "sent") == "1"
 
     def remember_result(self, fp: str, job_id: str) -> None:
         self.redis.set(f"{P}result:{fp}", job_id, ex=self.retention)

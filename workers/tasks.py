@@ -36,7 +36,7 @@ def store() -> JobStore:
     global _store
     if _store is None:
         s = get_settings()
-        _store = JobStore(s.redis_url, s.data_dir, s.retention_seconds)
+        _store = JobStore(s.redis_url, s.data_dir, s.retention_seconds, patience=60.0)  # ride out a Redis restart
     return _store
 
 

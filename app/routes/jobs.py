@@ -153,7 +153,13 @@ async def create_job(
             if old.input.get("request") != info["request"]:
                 raise ApiError(409, ErrorCode.CONFLICT, "Idempotency-Key already used for a different request")
             request.state.job_id = old.id
+            if old.status == "queued" and not store.was_sent(old.id):  # the broker was down when it was made
+                _send(celery, store, old, keyed=True)
             return await _respond(request, store, old, wait, owner)
+        if earlier and not store.rebind_idempotency(owner, idempotency_key, earlier, job_id):
+            # the key named a job whose record was never written (Redis went away): this request takes it over
+            store.discard_files(job_id)
+            raise ApiError(409, ErrorCode.CONFLICT, "a request with this Idempotency-Key is in progress: retry")
     job = Job(id=job_id, kind=kind, owner=owner, params=p, input=info, idempotency_key=idempotency_key)
     request.state.job_id = job_id
     earlier_result = store.reusable(info["fingerprint"], owner) if p["reuse"] else None
@@ -168,13 +174,21 @@ async def create_job(
             celery.send_task(CALLBACK_TASK, args=[job_id])
         return _job_response(job, request)
     store.create(job)
-    try:
-        celery.send_task(TASK_OF_KIND[kind], args=[job_id], task_id=job_id)
-    except Exception as exc:  # the broker is down: the job cannot run
-        store.transition(job_id, ("queued",), status="failed", finished_at=now(),
-                         error={"code": ErrorCode.UNAVAILABLE.value, "message": "the queue is unreachable"})
-        raise ApiError(503, ErrorCode.UNAVAILABLE, f"the queue is unreachable: {type(exc).__name__}") from None
+    _send(celery, store, job, keyed=bool(idempotency_key))
     return await _respond(request, store, job, wait, owner)
+
+
+def _send(celery: Any, store: Any, job: Job, keyed: bool) -> None:
+    """Queue the job's task and mark it sent. When the broker is down: a keyed job stays queued (a retry with its
+    Idempotency-Key sends it), any other fails with unavailable (its client submits again); a 503 either way."""
+    try:
+        celery.send_task(TASK_OF_KIND[job.kind], args=[job.id], task_id=job.id)
+    except Exception as exc:  # the broker is down: the job cannot run yet
+        if not keyed:
+            store.transition(job.id, ("queued",), status="failed", finished_at=now(),
+                             error={"code": ErrorCode.UNAVAILABLE.value, "message": "the queue is unreachable"})
+        raise ApiError(503, ErrorCode.UNAVAILABLE, f"the queue is unreachable: {type(exc).__name__}") from None
+    store.mark_sent(job.id)
 
 
 async def _respond(request: Request, store: Any, job: Job, wait: float, owner: str) -> Response:
