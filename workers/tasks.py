@@ -17,6 +17,7 @@ from celery.exceptions import SoftTimeLimitExceeded, TimeLimitExceeded
 
 from amprep import callbacks
 from amprep.errors import AmprepError, ErrorCode, out_of_memory
+from amprep.geometry.core.progress import checking
 from amprep.jobs.common import provenance
 from amprep.jobs.params import KINDS, JobKind
 from amprep.jobs.runner import run
@@ -60,7 +61,18 @@ class _Reporter:
     """progress(stage, fraction) for the library: throttled writes to the job record; raises on cancel."""
 
     def __init__(self, job_id: str) -> None:
-        self.job_id, self.last = job_id, 0.0
+        self.job_id, self.last, self.last_check = job_id, 0.0, 0.0
+
+    def check(self) -> None:
+        """The library's checkpoint between blocks of one long computation: raises when the job was cancelled
+        (asks Redis at most every 0.5 s)."""
+        t = time.monotonic()
+        if t - max(self.last, self.last_check) < 0.5:
+            return
+        self.last_check = t
+        job = store().get(self.job_id)
+        if job is None or job.status == "cancelled":
+            raise AmprepError(ErrorCode.CANCELLED, "the job was cancelled")
 
     def __call__(self, stage: str, fraction: float) -> None:
         t = time.monotonic()
@@ -94,8 +106,9 @@ def run_job(job_id: str) -> None:
     params = job.params | {"max_triangles": min(job.params.get("max_triangles", settings.max_triangles),
                                                 settings.max_triangles)}
     try:
-        with memory_budget(settings.memory_limit_mb):
-            result, paths = run(job.kind, src, params, st.job_dir(job_id) / "out", _Reporter(job_id), stl)
+        reporter = _Reporter(job_id)
+        with memory_budget(settings.memory_limit_mb), checking(reporter.check):
+            result, paths = run(job.kind, src, params, st.job_dir(job_id) / "out", reporter, stl)
         artifacts = [st.add_artifact(job_id, p) for p in paths]
     except AmprepError as exc:
         if exc.code == ErrorCode.CANCELLED:

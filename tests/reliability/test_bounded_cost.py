@@ -64,3 +64,37 @@ def test_the_box_cusp_method_runs_in_blocks_with_the_same_answer(monkeypatch):
     assert len(calls) > 10 and calls[-1] == 1.0
     np.testing.assert_array_equal(whole.height, blocks.height)
     assert np.isfinite(whole.height).sum() > 100
+
+
+def test_the_chordal_kernel_runs_in_bounded_calls_that_see_a_cancel(reference_solids, monkeypatch):
+    """A face's chordal error by the compiled kernel in calls of CALL_TRIANGLES, checkpoint() between them: the
+    same numbers as one call, and a cancel raised at a checkpoint stops it."""
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.cad.surfaces import surface_of
+    from amprep.geometry.core.compiled import compiled
+    from amprep.geometry.core.progress import checking
+    from amprep.geometry.measure import chordal
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
+
+    model = model_from_shape(reference_solids["torus"])
+    mesh = mesh_model(model, MeshParams(tolerance=0.005)).mesh
+    face = int(np.bincount(mesh.face_ids).argmax())
+    sel = mesh.face_ids == face
+    corners, uv, surface = mesh.corners[sel], mesh.uv[sel], surface_of(model.faces[face])
+    assert len(corners) > 5000
+    with compiled(True):
+        whole = chordal.triangle_chordal_error(corners, uv, surface)
+        monkeypatch.setattr(chordal, "CALL_TRIANGLES", 500)
+        calls: list[int] = []
+        with checking(lambda: calls.append(1)):
+            blocks = chordal.triangle_chordal_error(corners, uv, surface)
+        np.testing.assert_array_equal(whole, blocks)
+        assert len(calls) == (len(corners) - 1) // 500
+
+        def cancel() -> None:
+            raise AmprepError(ErrorCode.CANCELLED, "the job was cancelled")
+
+        with checking(cancel), pytest.raises(AmprepError) as e:
+            chordal.triangle_chordal_error(corners, uv, surface)
+    assert e.value.code == ErrorCode.CANCELLED

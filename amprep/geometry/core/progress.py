@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 
 #: progress(stage, fraction in [0, 1]); may raise to cancel.
 ProgressFn = Callable[[str, float], None]
@@ -26,3 +28,25 @@ class Progress:
         width = self._end - self._start
         return Progress(self._fn, self._start + width * start, self._start + width * end)
 
+
+
+_CHECK: ContextVar[Callable[[], None] | None] = ContextVar("amprep_checkpoint", default=None)
+
+
+def checkpoint() -> None:
+    """Run the current job's cancel check (set by `checking`), if any: a loop over blocks of one long computation
+    calls it between blocks, so a cancel is seen within a block's time (a time limit, raised by a signal, is seen
+    there too, since Python runs between blocks)."""
+    fn = _CHECK.get()
+    if fn is not None:
+        fn()
+
+
+@contextmanager
+def checking(fn: Callable[[], None] | None) -> Iterator[None]:
+    """Inside the block, checkpoint() calls `fn` (which raises to cancel)."""
+    token = _CHECK.set(fn)
+    try:
+        yield
+    finally:
+        _CHECK.reset(token)

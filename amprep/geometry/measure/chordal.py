@@ -10,8 +10,11 @@ import numpy as np
 from amprep.geometry.cad import bspline as _bspline
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.compiled import compiled, use_compiled
+from amprep.geometry.core.progress import checkpoint
 
 _CHUNK_POINTS = 1_000_000
+#: triangles per call of a compiled kernel (~0.1 s of a B-spline face at order 6 here): checkpoint() between calls
+CALL_TRIANGLES = 100_000
 _kernels = None  # the _chordal_kernel module once loaded
 #: numba's start-up (~0.6 s per process) pays for itself from about 100k triangles at order 6 (the kernels run
 #: ~3× numpy's speed on 2 cores): a call this large runs them unless the enclosing computation chose
@@ -136,21 +139,31 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
     out = np.empty(len(corners))
     corners = np.ascontiguousarray(corners, dtype=np.float64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
+    for s in range(0, len(corners), CALL_TRIANGLES):  # bounded calls: a cancel or time limit seen between them
+        if s:
+            checkpoint()
+        sl = slice(s, s + CALL_TRIANGLES)
+        _kernel_call(kind, d, corners[sl], uv[sl], w, stop, out[sl])
+    return out
+
+
+def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: np.ndarray,  # type: ignore[type-arg]
+                 uv: np.ndarray, w: np.ndarray, stop: float, out: np.ndarray) -> None:
+    """One call of the analytic (`kind`) or B-spline (`d`) chordal kernel, writing `out` (m,)."""
+    assert _kernels is not None
     serial = len(corners) <= _kernels.BLOCK
     if kind is not None:
         fn = _kernels.analytic_chordal_serial if serial else _kernels.analytic_chordal_kernel
         fn(kind[0], kind[1], corners, uv, w, float(stop), out)
-    else:
-        assert d is not None
-        if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
-            d["_pw"] = np.ascontiguousarray(np.concatenate([d["poles"] * d["weights"][..., None],
-                                                            d["weights"][..., None]], axis=2))
-        pw = d["_pw"]
-        per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
-        fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
-        fn(pw, np.ascontiguousarray(d["uknots"], dtype=np.float64), np.ascontiguousarray(d["vknots"], dtype=np.float64),
-           int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w), float(stop), out)
-    return out
+        return
+    assert d is not None
+    if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
+        d["_pw"] = np.ascontiguousarray(np.concatenate([d["poles"] * d["weights"][..., None],
+                                                        d["weights"][..., None]], axis=2))
+    per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
+    fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
+    fn(d["_pw"], np.ascontiguousarray(d["uknots"], dtype=np.float64), np.ascontiguousarray(d["vknots"], dtype=np.float64),
+       int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w), float(stop), out)
 
 
 def triangle_chordal_error(
@@ -180,6 +193,8 @@ def triangle_chordal_error(
     out = np.empty(m)
     step = max(1, _CHUNK_POINTS // len(w))
     for s in range(0, m, step):
+        if s:
+            checkpoint()
         sl = slice(s, s + step)
         pts_uv = np.einsum("pk,mkd->mpd", w, uv[sl]).reshape(-1, 2)
         xyz = evaluate(pts_uv).reshape(-1, len(w), 3)
