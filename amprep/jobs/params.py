@@ -129,8 +129,9 @@ KINDS: dict[str, JobKind] = {k.name: k for k in (
             ("report.json",), "quick", True, "STEP, IGES or BREP (tessellated as convert does), or an STL"),
     JobKind("refine", "Densify the curved faces whose error is too high (SMA, VTA or adaptive), keeping the mesh closed",
             _meshing(0.2, "Tolerance of the first tessellation when no STL is given") + _PRINT + (
-                Param("method", "choice", "sma", "sma (the thesis), vta (its baseline) or adaptive (error-driven edge "
-                      "bisection)", choices=("sma", "vta", "adaptive")),
+                Param("method", "choice", "sma", "sma (the thesis), vta (its baseline), adaptive (error-driven edge "
+                      "bisection), or butterfly (an STL alone, no CAD: the modified Butterfly limit surface)",
+                      choices=("sma", "vta", "adaptive", "butterfly")),
                 Param("faces", "ids", None, "CAD face ids to refine, e.g. 3,7 (else chosen by the thresholds; with no "
                       "threshold, every curved face)", optional=True),
                 Param("max_chordal", "float", None, "Refine curved faces whose mean chordal error exceeds this", "mm",
@@ -145,8 +146,12 @@ KINDS: dict[str, JobKind] = {k.name: k for k in (
                 Param("target", "float", None, "adaptive: chordal error every refined triangle must reach (default: a "
                       "tenth of the chosen faces' worst)", "mm", gt=0, optional=True),
                 Param("compare", "bool", True, "Add uniform re-tessellations and the other method to the report"),
+                Param("levels", "int", 1, "butterfly: levels of 1-to-4 splitting (each ×4 the triangles)", ge=1, le=6),
+                Param("feature_angle", "float", 30.0, "butterfly: dihedral angle over which an edge is a sharp feature "
+                      "curve, kept sharp", "deg", gt=0, lt=180),
             ) + _OUTPUT + _SERVICE,
-            ("refined.stl", "refined.3mf"), "heavy", True, "STEP, IGES or BREP (with the STL to refine as `stl`)"),
+            ("refined.stl", "refined.3mf"), "heavy", True, "STEP, IGES or BREP (with the STL to refine as `stl`), or "
+            "an STL alone with method butterfly"),
 )}
 
 

@@ -23,6 +23,7 @@ from amprep.geometry.measure.report import Issue
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_file
 from amprep.geometry.placement.place import PlacedStl, place_user_stl, unmatched_issue
+from amprep.geometry.refine.butterfly import ButterflyParams, butterfly_refine
 from amprep.geometry.refine.compare import (
     STL_HEADER,
     STL_PER_TRIANGLE,
@@ -59,9 +60,14 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
     params.validate()
     prog = Progress(progress)
     fmt, info = input_of(path)
+    if params.method == "butterfly":
+        if is_cad(fmt) or stl is not None:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "butterfly refines an STL alone (no CAD): give the STL as "
+                              "the input; for a CAD model use sma, vta or adaptive")
+        return refine_stl(path, info, params, prog)
     if not is_cad(fmt):
         raise AmprepError(ErrorCode.INVALID_PARAMETER, f"{params.method.upper()} refines faces of a CAD model: give "
-                          "the STEP, IGES or BREP (and the STL with --stl); STL-only refinement is not available yet")
+                          "the STEP, IGES or BREP (and the STL with --stl), or use method butterfly for an STL alone")
     placed: PlacedStl | None = None
     if stl is not None:
         prog("reading", 0.0)
@@ -78,6 +84,31 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
         info.update(model_info(model), source="tessellation", tolerance=res.tolerance)
     with compiled(worth_compiling(mesh.n_triangles, params.sample_order)):  # decided by the mesh, not by timing
         return _refine_and_report(model, mesh, surfaces, placed, info, base_tol, mesh_params, params, prog)
+
+
+def refine_stl(path: str | Path, info: dict[str, Any], params: RefineParams, prog: Progress) -> RefineResult:
+    """An STL refined alone by the modified Butterfly scheme (butterfly.py), with the analysis of the result and
+    what the refinement did (`butterfly` section: node classes, triangles by region, how far new nodes moved)."""
+    prog("reading", 0.0)
+    mesh = read_mesh(path)
+    size = mesh.n_triangles * 4 ** params.levels
+    if size > params.max_triangles:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"{params.levels} level(s) of butterfly would output {size:,} "
+                          f"triangles, over the limit of {params.max_triangles:,}: fewer levels")
+    info.update(source="stl", triangles=mesh.n_triangles)
+    result = butterfly_refine(mesh, ButterflyParams(params.levels, params.feature_angle), prog.span(0.05, 0.5))
+    ap = AnalysisParams(params.layer, params.build_dir, params.sample_order, bounding_box=False)
+    with compiled(worth_compiling(result.mesh.n_triangles, params.sample_order)):
+        analysis = analyze_mesh(result.mesh, ap, None, 0, info, None, prog.span(0.5, 0.95))
+    mesh_before = mesh_summary(mesh)
+    analysis.issues += topology_issues(mesh_before, analysis.mesh_section)
+    analysis.params = refine_params_section(params, None) | {"levels": params.levels,
+                                                             "feature_angle": params.feature_angle}
+    report = analysis.report
+    report.update(method="butterfly", mesh_before=mesh_before.to_json(), refined_faces=[], comparison=None,
+                  butterfly=result.to_json(), provenance=provenance(None))
+    prog("done", 1.0)
+    return RefineResult(result.mesh, result.mesh, mesh, report, analysis.chordal)
 
 
 def _refine_and_report(model: CadModel, mesh: Mesh, surfaces: dict[int, Surface], placed: PlacedStl | None,

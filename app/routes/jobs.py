@@ -138,6 +138,8 @@ async def create_job(
         info["stl"] = await sniff(stl, "stl")
         require_stl(info["stl"])
         require_cad(info["file"])
+    if kind == "refine":
+        _refine_input(p["method"], info)
     job_id = new_job_id()
     earlier = store.claim_idempotency(owner, idempotency_key, job_id) if idempotency_key else None
     job_dir = store.job_dir(job_id) / "input"
@@ -176,6 +178,17 @@ async def create_job(
     store.create(job)
     _send(celery, store, job, keyed=bool(idempotency_key))
     return await _respond(request, store, job, wait, owner)
+
+
+def _refine_input(method: str, info: dict[str, Any]) -> None:
+    """A refine job's input fits its method: butterfly an STL alone, the others a CAD file (422 otherwise)."""
+    stl_alone = info["file"]["format"] == "stl" and "stl" not in info
+    if method == "butterfly" and not stl_alone:
+        raise ApiError(422, ErrorCode.INVALID_PARAMETER, "butterfly refines an STL alone (no CAD): upload the STL as "
+                       "`file`; for a CAD model use sma, vta or adaptive")
+    if method != "butterfly" and info["file"]["format"] == "stl":
+        raise ApiError(422, ErrorCode.INVALID_PARAMETER, f"{method} refines the faces of a CAD model: upload the STEP, "
+                       "IGES or BREP as `file` (and an STL as `stl`), or use method butterfly for an STL alone")
 
 
 def _send(celery: Any, store: Any, job: Job, keyed: bool) -> None:

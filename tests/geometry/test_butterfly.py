@@ -163,3 +163,33 @@ def test_the_twelve_gon_of_fig_9():
     key = lambda p: np.round(p, 9)[np.lexsort(np.round(p, 9).T)]  # noqa: E731
     np.testing.assert_allclose(key(-new), key(new), atol=1e-9)
     assert check_mesh(out).boundary_edges == 24  # the 12-gon's 12 boundary edges split in two
+
+
+@pytest.mark.parametrize("name", ["voron_hotend_mount_dragon.stl", "voron_vhb_din_mount.stl", "featuretype_inch.stl",
+                                  "adis16480_metres.stl"])
+def test_corpus_stls_refine_without_new_defects(name):
+    """STLs written by others: closed in, closed out; no self-intersection where there was none; 4× the triangles."""
+    from tests.conftest import corpus
+
+    stl = read_stl(corpus(name))
+    before = check_mesh(stl)
+    out = butterfly_refine(stl, ButterflyParams(levels=1)).mesh
+    after = check_mesh(out)
+    assert out.n_triangles == 4 * stl.n_triangles
+    assert after.closed == before.closed and after.boundary_edges == 2 * before.boundary_edges
+    assert after.nonmanifold_edges == 2 * before.nonmanifold_edges
+    assert self_intersections(stl)[0] == 0 and self_intersections(out)[0] == 0
+
+
+def test_a_fold_is_undone(monkeypatch):
+    """With the height clamp off, the masks fold the slivers of a real STL; the unfolding pass alone undoes it."""
+    from amprep.geometry.refine import butterfly
+    from tests.conftest import corpus
+
+    stl = read_stl(corpus("adis16480_metres.stl"))
+    monkeypatch.setattr(butterfly, "CLAMP", 1e9)
+    monkeypatch.setattr(butterfly, "UNFOLD_ROUNDS", -1)  # no unfolding at all: the folds show
+    folded = butterfly_refine(stl, ButterflyParams(levels=1)).mesh
+    monkeypatch.setattr(butterfly, "UNFOLD_ROUNDS", 6)
+    unfolded = butterfly_refine(stl, ButterflyParams(levels=1)).mesh
+    assert self_intersections(folded)[0] > 0 and self_intersections(unfolded)[0] == 0

@@ -124,3 +124,20 @@ def test_a_bug_of_ours_is_one_line_internal_error_exit_2(tmp_path):
     assert r.returncode == 2 and len(lines) == 1 and "[internal_error]" in lines[0] and "ZeroDivisionError" in lines[0]
     r = subprocess.run(args, capture_output=True, text=True, timeout=120, env={**os.environ, "AMPREP_DEBUG": "1"})
     assert r.returncode != 0 and "Traceback" in r.stderr
+
+
+def test_refine_an_stl_alone_by_butterfly(tmp_path):
+    """`amprep refine IN.stl --method butterfly`: no CAD, 16× the triangles at 2 levels, closed, a report that says
+    what was refined; a CAD input with butterfly is refused with its reason."""
+    src = corpus("voron_vhb_din_mount.stl")
+    out, report = tmp_path / "fine.stl", tmp_path / "r.json"
+    r = run("refine", str(src), "--method", "butterfly", "--levels", "2", "-o", str(out), "--report", str(report),
+            "--no-compare")
+    assert r.returncode == 0, r.stderr
+    assert read_stl(out).n_triangles == 16 * read_stl(src).n_triangles
+    rep = json.loads(report.read_text())
+    assert rep["method"] == "butterfly" and rep["mesh"]["watertight"]
+    assert rep["butterfly"]["levels"] == 2 and rep["butterfly"]["nodes"]["curve"] > 0
+    assert "self_intersections" not in [i["code"] for i in rep["issues"]]
+    bad = run("refine", str(corpus("voron_vhb_din_mount.step")), "--method", "butterfly", "-o", str(out))
+    assert bad.returncode == 2 and "invalid_parameter" in bad.stderr and "STL alone" in bad.stderr

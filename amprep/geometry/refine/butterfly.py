@@ -21,7 +21,8 @@ Masks (Zorin, Schröder and Sweldens' modified Butterfly, as 002 lists its seven
   addition, for strips spanning between two curves, which 002 shows slimming (its Fig. 12) — the mean bulge (new
   node − midpoint) of the feature edges of the edge's two triangles;
 - feature curves: the 4-point mask (−1, 9, 9, −1)/16 between two curve nodes, the 3-point (3/8, 3/4, −1/8) next to
-  a vertex node, the midpoint between two vertex nodes.
+  a vertex node, the midpoint between two vertex nodes; a curve node where its curve turns by more than the feature
+  angle (an outline's corner) is a vertex node.
 Every mask is an affine combination of nodes of one smooth region or one curve, so a planar region bounded by
 feature curves stays in its plane and a straight curve stays straight.
 """
@@ -44,6 +45,10 @@ COPLANAR = 1e-4
 #: a bend whose flat side (a coplanar pair or more) is this many times higher over it than its other side bounds a
 #: flat face
 HEIGHT_RATIO = 3.0
+#: a surface edge's new node moves at most this × the lower of its triangles' heights over the edge (_clamp)
+CLAMP = 0.25
+#: rounds of halving the displacement of a folding triangle's new nodes before they are dropped (_unfold)
+UNFOLD_ROUNDS = 6
 
 
 @dataclass(frozen=True)
@@ -223,16 +228,19 @@ def _node_class(n: int, edges: np.ndarray, feature: np.ndarray, he: _Halfedges, 
     return cls, valence
 
 
-def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                              np.ndarray, dict[str, int]]:
+def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndarray, corner: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
     """One level: (vertices, triangles, child feature keys, (E,) new-node displacement off the midpoint, node
-    counts by class). feature_keys: sorted lo·n+hi codes of the feature edges."""
+    counts by class). feature_keys: sorted lo·n+hi codes of the feature edges; flat (m,): triangles of a flat
+    region, whose inner edges are split at their midpoints (a flat region keeps its triangles' shapes); corner (n,):
+    nodes held as vertex nodes (where a curve turns sharply)."""
     n = len(v)
     he = _Halfedges.of(t)
     edges = he.edges
     keys = edges[:, 0] * n + edges[:, 1]
     feature = np.isin(keys, feature_keys)
     cls, valence = _node_class(n, edges, feature, he, t)
+    cls[corner[:n]] = VERTEX
     tgt = t[:, [1, 2, 0]].reshape(-1)  # target vertex of each half-edge
     n_e = len(edges)
     # one half-edge a→b per edge (the first use), its twin b→a
@@ -251,6 +259,10 @@ def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray) -> tuple[np.n
     _curve_masks(v, new, feature, edges, a, b, ca, cb)
     _surface_masks(v, tgt, he, new, surface_edge, a, b, c, d, h_ab, h_ba, cls, valence, np.where(
         feature[:, None], new - mid, np.nan))
+    inner_flat = surface_edge & flat[h_ab // 3] & flat[np.maximum(h_ba, 0) // 3]
+    new[inner_flat] = mid[inner_flat]
+    _clamp(v, t, he, new, mid, surface_edge | feature, h_ab, h_ba)
+    _unfold(v, t, he.edge.reshape(-1, 3), new, mid)
     moved = np.linalg.norm(new - mid, axis=1)
     # split: corner k of each triangle, and the new nodes on its sides k (k→k+1)
     mids = n + he.edge.reshape(-1, 3)
@@ -325,6 +337,59 @@ def _surface_masks(v: np.ndarray, tgt: np.ndarray, he: _Halfedges, new: np.ndarr
     new[sw] = swap[sw] / nswap[sw, None]
 
 
+def _clamp(v: np.ndarray, t: np.ndarray, he: _Halfedges, new: np.ndarray, mid: np.ndarray, edges_in: np.ndarray,
+           h_ab: np.ndarray, h_ba: np.ndarray) -> None:
+    """Limit the new node of each edge in `edges_in` (E,) bool to CLAMP × the lower of its triangles' heights over
+    the edge from its midpoint: next to the slivers STL files are full of (a loft's long triangles, a plane's fan), a
+    mask's pull can exceed the sliver's width and fold the surface onto itself (a child triangle turns over when
+    its edge's node moves past half the height); on well-shaped triangles the limit is never reached."""
+    e = np.flatnonzero(edges_in)
+    if len(e) == 0:
+        return
+    ab = v[t.reshape(-1)[h_ab[e]]] - v[t[:, [1, 2, 0]].reshape(-1)[h_ab[e]]]
+    length = np.maximum(np.linalg.norm(ab, axis=1), 1e-300)
+
+    def height(h: np.ndarray) -> np.ndarray:
+        tri = t[h // 3]
+        cross = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])
+        return np.linalg.norm(cross, axis=1) / length
+
+    other = h_ba[e]
+    limit = CLAMP * np.where(other >= 0, np.minimum(height(h_ab[e]), height(np.maximum(other, 0))), height(h_ab[e]))
+    off = new[e] - mid[e]
+    dist = np.linalg.norm(off, axis=1)
+    scale = np.where(dist > limit, limit / np.maximum(dist, 1e-300), 1.0)
+    new[e] = mid[e] + off * scale[:, None]
+
+
+def _children(points: np.ndarray, t: np.ndarray, mids: np.ndarray) -> np.ndarray:
+    """(4, m, 3, 3) corners of each triangle's four children (corner k's, then the middle one)."""
+    c = [points[t[:, k]] for k in range(3)]
+    m = [points[mids[:, k]] for k in range(3)]  # side k joins corners k and k+1
+    return np.stack([np.stack([c[0], m[0], m[2]], 1), np.stack([c[1], m[1], m[0]], 1),
+                     np.stack([c[2], m[2], m[1]], 1), np.stack([m[0], m[1], m[2]], 1)])
+
+
+def _unfold(v: np.ndarray, t: np.ndarray, edge_of: np.ndarray, new: np.ndarray, mid: np.ndarray) -> None:
+    """Where a triangle's child would turn more than ~72° from the triangle (a fold: the new nodes of its sides
+    moved past its narrow width), halve those sides' displacements, up to UNFOLD_ROUNDS times, then drop them:
+    the plain split never folds."""
+    n = len(v)
+    mids = n + edge_of
+    parent = _unit_normals(v, t)
+    for round_ in range(UNFOLD_ROUNDS + 1):
+        kids = _children(np.concatenate([v, new]), t, mids)
+        cross = np.cross(kids[:, :, 1] - kids[:, :, 0], kids[:, :, 2] - kids[:, :, 0])
+        norm = np.linalg.norm(cross, axis=2)
+        cos = np.einsum("kmj,mj->km", cross, parent) / np.maximum(norm, 1e-300)
+        bad = ((cos < 0.3) & (norm > 0)).any(axis=0) & (np.linalg.norm(parent, axis=1) > 0)
+        if not bad.any():
+            return
+        sides = np.unique(edge_of[bad])
+        factor = 0.5 if round_ < UNFOLD_ROUNDS else 0.0
+        new[sides] = mid[sides] + factor * (new[sides] - mid[sides])
+
+
 def _side_bulge(he: _Halfedges, h_ab: np.ndarray, h_ba: np.ndarray, bulge: np.ndarray) -> np.ndarray:
     """(r, 3) mean bulge of the feature edges among the other sides of an edge's two triangles (0 when none): an
     edge spanning between curves (a cylinder's strip, a fillet's) follows their curvature, so the strip does not
@@ -369,6 +434,25 @@ def _curve_masks(v: np.ndarray, new: np.ndarray, feature: np.ndarray, edges: np.
     # two vertex nodes: the midpoint, already there
 
 
+def sharp_turns(v: np.ndarray, feature_edges: np.ndarray, feature_angle: float) -> np.ndarray:
+    """(n,) True at nodes with exactly two feature edges that turn by more than the feature angle (a corner of an
+    outline): vertex nodes, which the curve masks do not round off."""
+    n = len(v)
+    ends = np.concatenate([feature_edges, feature_edges[:, ::-1]])
+    ends = ends[np.argsort(ends[:, 0], kind="stable")]
+    count = np.bincount(ends[:, 0], minlength=n)
+    out = np.zeros(n, bool)
+    two = np.flatnonzero(count == 2)
+    if len(two) == 0:
+        return out
+    first = np.searchsorted(ends[:, 0], two)
+    p, q = ends[first, 1], ends[first + 1, 1]
+    u, w = v[two] - v[p], v[q] - v[two]
+    cos = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
+    out[two[cos < math.cos(math.radians(feature_angle))]] = True
+    return out
+
+
 def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
                      progress: ProgressFn | None = None) -> ButterflyResult:
     """The mesh refined `levels` times by the modified Butterfly scheme (the module's docstring): (4^levels · m,)
@@ -386,9 +470,13 @@ def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
     planar = _flat_triangles(v, t, feature)
     triangles_in = {"planar": int(planar.sum()), "curved": int((~planar).sum())}
     moved_all, per_level, counts0 = [], [], {}
+    planar_now = planar
+    corner = sharp_turns(v, edges[feature], params.feature_angle)
     for level in range(params.levels):
         prog("refining", level / params.levels)
-        v, t, keys, moved, counts = _level(v, t, keys)
+        v, t, keys, moved, counts = _level(v, t, keys, planar_now, corner)
+        corner = np.concatenate([corner, np.zeros(len(v) - len(corner), bool)])
+        planar_now = np.tile(planar_now, 4)  # child j of a level's triangle p is p + k·m (k = 0..3)
         counts0 = counts0 or counts
         moved_all.append(moved)
         per_level.append({"triangles": len(t), "moved_max": float(moved.max(initial=0.0)),

@@ -24,7 +24,7 @@ from amprep.geometry.refine.adaptive import adaptive_refine
 from amprep.geometry.refine.sma import Ratios, Refinement, sma_output_size, sma_refine
 from amprep.geometry.refine.vta import vta_refine
 
-METHODS = ("sma", "vta", "adaptive")
+METHODS = ("sma", "vta", "adaptive", "butterfly")  # butterfly: an STL alone (butterfly.py)
 
 
 STL_HEADER, STL_PER_TRIANGLE = 84, 50  # binary STL bytes
@@ -51,6 +51,8 @@ class RefineParams:
     compare_vta_iterations: int = 3  # 3 rounds of 1 → 3 give 27× the triangles: SMA's size (27 + 2k per triangle)
     compare_box: bool = True  # the bounding-box cusp height of every compared mesh (slow on big parts)
     max_triangles: int = 10_000_000  # refuse (output_too_large) a refinement predicted to exceed this
+    levels: int = 1  # butterfly: levels of 1-to-4 splitting
+    feature_angle: float = 30.0  # butterfly: dihedral angle (deg) over which an edge is a feature curve
 
     def validate(self) -> None:
         if self.method not in METHODS:
