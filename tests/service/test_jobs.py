@@ -112,10 +112,15 @@ def test_refine_job_returns_the_users_stl_refined_in_its_own_frame(service, tmp_
 
 
 def test_refine_job_failure_has_a_code(service):
+    """A refine job that fails in the worker ends with the library's code; an input that does not fit the method
+    is refused at submit."""
     with service.client() as c:
-        job = submit(c, corpus("featuretype_inch.stl"), kind="refine", wait=120).json()
-    assert job["status"] == "failed" and job["error"]["code"] == "invalid_parameter"
-    assert "CAD" in job["error"]["message"]
+        # 6 levels of butterfly: 3,476 × 4⁶ = 14 M triangles, over the default 10 M
+        job = submit(c, corpus("featuretype_inch.stl"), kind="refine", params='{"method": "butterfly", "levels": 6}',
+                     wait=120).json()
+        assert job["status"] == "failed" and job["error"]["code"] == "output_too_large"
+        r = submit(c, corpus("featuretype_inch.stl"), kind="refine")  # sma needs the CAD
+        assert r.status_code == 422 and r.json()["code"] == "invalid_parameter" and "CAD" in r.json()["detail"]
 
 
 @pytest.mark.parametrize(("kind", "params", "code"), [

@@ -29,7 +29,6 @@ feature curves stays in its plane and a straight curve stays straight.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,13 +37,19 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.refine.stl_features import (
+    CURVE,
+    SURFACE,
+    VERTEX,
+    Halfedges,
+    classify,
+    flat_triangles,
+    node_class,
+    sharp_turns,
+    succ,
+    unit_normals,
+)
 
-SURFACE, CURVE, VERTEX = 0, 1, 2
-#: adjacent triangles whose normals differ by less than this (rad) are coplanar
-COPLANAR = 1e-4
-#: a bend whose flat side (a coplanar pair or more) is this many times higher over it than its other side bounds a
-#: flat face
-HEIGHT_RATIO = 3.0
 #: a surface edge's new node moves at most this × the lower of its triangles' heights over the edge (_clamp)
 CLAMP = 0.25
 #: rounds of halving the displacement of a folding triangle's new nodes before they are dropped (_unfold)
@@ -88,47 +93,6 @@ class ButterflyResult:
                 "moved": {"max": self.moved_max, "mean": self.moved_mean}, "per_level": self.per_level}
 
 
-def _unit_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
-    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
-
-
-@dataclass(frozen=True)
-class _Halfedges:
-    """Half-edge h = 3t + k runs T[t,k] → T[t,k+1]; `twin` (3m,) the opposite half-edge or −1; `edge` (3m,) its
-    undirected edge; `inc` the edge table."""
-
-    twin: np.ndarray
-    edge: np.ndarray
-    count: np.ndarray
-    edges: np.ndarray
-
-    @classmethod
-    def of(cls, t: np.ndarray) -> _Halfedges:
-        inc = edge_incidence(t)
-        edge = inc.edge_of.reshape(-1)
-        order = np.argsort(edge, kind="stable")
-        twin = np.full(len(edge), -1, np.int64)
-        pair = inc.count[edge[order]] == 2
-        first = order[pair][0::2]
-        second = order[pair][1::2]
-        twin[first], twin[second] = second, first
-        return cls(twin, edge, inc.count, inc.edges)
-
-
-def _succ(he: _Halfedges, h: np.ndarray) -> np.ndarray:
-    """The next outgoing half-edge around its start vertex (the vertex after h's target in the ring), −1 at a hole."""
-    prev_in_tri = 3 * (h // 3) + (h % 3 + 2) % 3
-    return he.twin[prev_in_tri]
-
-
-def _pred(he: _Halfedges, h: np.ndarray) -> np.ndarray:
-    """The previous outgoing half-edge around its start vertex, −1 at a hole."""
-    tw = he.twin[h]
-    return np.where(tw >= 0, 3 * (tw // 3) + (tw % 3 + 1) % 3, -1)
-
-
 def _weights(k: np.ndarray, j: int) -> np.ndarray:
     """s_j(k) of the irregular surface mask, (r,) for valences k (0 where j ≥ k)."""
     kf = np.maximum(k, 1).astype(float)
@@ -138,7 +102,7 @@ def _weights(k: np.ndarray, j: int) -> np.ndarray:
     return np.where(j < k, s, 0.0)
 
 
-def _ring_masks(v: np.ndarray, tgt: np.ndarray, he: _Halfedges, centre: np.ndarray, first: np.ndarray,
+def _ring_masks(v: np.ndarray, tgt: np.ndarray, he: Halfedges, centre: np.ndarray, first: np.ndarray,
                 h0: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(irregular mask position, ring[2], ring[k−2]) of requests (r,): a centre with ring q_0 = first, then
     q_j = target of succ^(j−1)(h0) for j = 1..k−1."""
@@ -158,74 +122,8 @@ def _ring_masks(v: np.ndarray, tgt: np.ndarray, he: _Halfedges, centre: np.ndarr
             ring2[live] = q
         at_m2 = k[live] - 2 == j
         ringm2[live[at_m2]] = q[at_m2]
-        h = _succ(he, h)
+        h = succ(he, h)
     return pos, ring2, ringm2
-
-
-def classify(v: np.ndarray, t: np.ndarray, feature_angle: float, flat_faces: bool = True) -> np.ndarray:
-    """(E,) bool feature flag of the edges of edge_incidence(t) (the module's docstring)."""
-    he = _Halfedges.of(t)
-    normals = _unit_normals(v, t)
-    n_e = len(he.count)
-    feature = he.count != 2
-    side = np.arange(3 * len(t))
-    has_twin = he.twin >= 0
-    h1 = side[has_twin & (side < np.where(has_twin, he.twin, -1))]
-    t1, t2 = h1 // 3, he.twin[h1] // 3
-    e = he.edge[h1]
-    cosang = np.clip(np.einsum("ij,ij->i", normals[t1], normals[t2]), -1.0, 1.0)
-    theta = np.arccos(cosang)
-    feature[e[theta > math.radians(feature_angle)]] = True
-    if not flat_faces:
-        return feature
-    coplanar = theta < COPLANAR
-    # coplanar patches: components over coplanar edges; ≥ 3 triangles make a flat face
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    m = len(t)
-    graph = coo_matrix((np.ones(int(coplanar.sum())), (t1[coplanar], t2[coplanar])), shape=(m, m))
-    _, patch = connected_components(graph, directed=False)
-    size = np.bincount(patch)
-    flat = size[patch] >= 3
-    bends = ~coplanar & (theta <= math.radians(feature_angle))
-    feature[e[bends & (flat[t1] != flat[t2])]] = True
-    feature[e[bends & flat[t1] & flat[t2] & (patch[t1] != patch[t2])]] = True
-    # a tangent junction of a flat face: the flat side's triangle is far higher over the edge than the curved
-    # side's (a facet of a curved face is as wide as the tessellation tolerance allows, a flat face is not)
-    a, b = he.edges[e, 0], he.edges[e, 1]
-    length = np.maximum(np.linalg.norm(v[b] - v[a], axis=1), 1e-300)
-    area = 0.5 * np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1)
-    h1, h2 = 2 * area[t1] / length, 2 * area[t2] / length
-    big = np.where(h1 >= h2, t1, t2)
-    ratio = np.maximum(h1, h2) / np.maximum(np.minimum(h1, h2), 1e-300)
-    feature[e[bends & (size[patch[big]] >= 2) & (ratio > HEIGHT_RATIO)]] = True
-    assert len(feature) == n_e
-    return feature
-
-
-def _node_class(n: int, edges: np.ndarray, feature: np.ndarray, he: _Halfedges, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """((n,) SURFACE | CURVE | VERTEX, (n,) valence): by incident feature edges; a surface node whose triangles are
-    not one closed fan (an open or pinched ring) is a vertex node."""
-    fe = edges[feature]
-    nf = np.bincount(fe.ravel(), minlength=n)
-    valence = np.bincount(edges.ravel(), minlength=n)
-    cls = np.where(nf == 0, SURFACE, np.where(nf == 2, CURVE, VERTEX))
-    start = np.full(n, -1, np.int64)
-    start[t.reshape(-1)] = np.arange(3 * len(t))  # one outgoing half-edge per vertex
-    surf = np.flatnonzero((cls == SURFACE) & (start >= 0))
-    h = start[surf]
-    steps = np.zeros(len(surf), np.int64)
-    back = np.zeros(len(surf), bool)
-    for j in range(1, int(valence[surf].max(initial=0)) + 1):
-        h = np.where(h >= 0, _succ(he, np.maximum(h, 0)), -1)
-        hit = ~back & (h == start[surf])
-        steps[hit] = j
-        back |= hit
-    closed_fan = back & (steps == valence[surf])
-    cls[surf[~closed_fan]] = VERTEX
-    cls[valence == 0] = VERTEX
-    return cls, valence
 
 
 def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndarray, corner: np.ndarray
@@ -235,11 +133,11 @@ def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndar
     region, whose inner edges are split at their midpoints (a flat region keeps its triangles' shapes); corner (n,):
     nodes held as vertex nodes (where a curve turns sharply)."""
     n = len(v)
-    he = _Halfedges.of(t)
+    he = Halfedges.of(t)
     edges = he.edges
     keys = edges[:, 0] * n + edges[:, 1]
     feature = np.isin(keys, feature_keys)
-    cls, valence = _node_class(n, edges, feature, he, t)
+    cls, valence = node_class(n, edges, feature, he, t)
     cls[corner[:n]] = VERTEX
     tgt = t[:, [1, 2, 0]].reshape(-1)  # target vertex of each half-edge
     n_e = len(edges)
@@ -279,7 +177,7 @@ def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndar
     return np.concatenate([v, new]), tris, np.sort(lo * n2 + hi), moved, counts
 
 
-def _surface_masks(v: np.ndarray, tgt: np.ndarray, he: _Halfedges, new: np.ndarray, surface_edge: np.ndarray,
+def _surface_masks(v: np.ndarray, tgt: np.ndarray, he: Halfedges, new: np.ndarray, surface_edge: np.ndarray,
                    a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray, h_ab: np.ndarray, h_ba: np.ndarray,
                    cls: np.ndarray, valence: np.ndarray, bulge: np.ndarray) -> None:
     """New nodes of surface edges (rules 1–4, with 002's rules I and II), written into `new` (E, 3); `bulge` (E, 3)
@@ -287,8 +185,8 @@ def _surface_masks(v: np.ndarray, tgt: np.ndarray, he: _Halfedges, new: np.ndarr
     sa, sb = cls[a] == SURFACE, cls[b] == SURFACE
     e_a = np.flatnonzero(surface_edge & sa)
     e_b = np.flatnonzero(surface_edge & sb)
-    pos_a, a2, am2 = _ring_masks(v, tgt, he, a[e_a], b[e_a], _succ(he, h_ab[e_a]), valence[a[e_a]])
-    pos_b, b2, bm2 = _ring_masks(v, tgt, he, b[e_b], a[e_b], _succ(he, h_ba[e_b]), valence[b[e_b]])
+    pos_a, a2, am2 = _ring_masks(v, tgt, he, a[e_a], b[e_a], succ(he, h_ab[e_a]), valence[a[e_a]])
+    pos_b, b2, bm2 = _ring_masks(v, tgt, he, b[e_b], a[e_b], succ(he, h_ba[e_b]), valence[b[e_b]])
     acc = np.zeros_like(new)
     cnt = np.zeros(len(new))
     acc[e_a] += pos_a
@@ -337,7 +235,7 @@ def _surface_masks(v: np.ndarray, tgt: np.ndarray, he: _Halfedges, new: np.ndarr
     new[sw] = swap[sw] / nswap[sw, None]
 
 
-def _clamp(v: np.ndarray, t: np.ndarray, he: _Halfedges, new: np.ndarray, mid: np.ndarray, edges_in: np.ndarray,
+def _clamp(v: np.ndarray, t: np.ndarray, he: Halfedges, new: np.ndarray, mid: np.ndarray, edges_in: np.ndarray,
            h_ab: np.ndarray, h_ba: np.ndarray) -> None:
     """Limit the new node of each edge in `edges_in` (E,) bool to CLAMP × the lower of its triangles' heights over
     the edge from its midpoint: next to the slivers STL files are full of (a loft's long triangles, a plane's fan), a
@@ -376,7 +274,7 @@ def _unfold(v: np.ndarray, t: np.ndarray, edge_of: np.ndarray, new: np.ndarray, 
     the plain split never folds."""
     n = len(v)
     mids = n + edge_of
-    parent = _unit_normals(v, t)
+    parent = unit_normals(v, t)
     for round_ in range(UNFOLD_ROUNDS + 1):
         kids = _children(np.concatenate([v, new]), t, mids)
         cross = np.cross(kids[:, :, 1] - kids[:, :, 0], kids[:, :, 2] - kids[:, :, 0])
@@ -390,7 +288,7 @@ def _unfold(v: np.ndarray, t: np.ndarray, edge_of: np.ndarray, new: np.ndarray, 
         new[sides] = mid[sides] + factor * (new[sides] - mid[sides])
 
 
-def _side_bulge(he: _Halfedges, h_ab: np.ndarray, h_ba: np.ndarray, bulge: np.ndarray) -> np.ndarray:
+def _side_bulge(he: Halfedges, h_ab: np.ndarray, h_ba: np.ndarray, bulge: np.ndarray) -> np.ndarray:
     """(r, 3) mean bulge of the feature edges among the other sides of an edge's two triangles (0 when none): an
     edge spanning between curves (a cylinder's strip, a fillet's) follows their curvature, so the strip does not
     slim (002's Fig. 12) — our addition to rule II; in a plane the bulges lie in the plane."""
@@ -434,25 +332,6 @@ def _curve_masks(v: np.ndarray, new: np.ndarray, feature: np.ndarray, edges: np.
     # two vertex nodes: the midpoint, already there
 
 
-def sharp_turns(v: np.ndarray, feature_edges: np.ndarray, feature_angle: float) -> np.ndarray:
-    """(n,) True at nodes with exactly two feature edges that turn by more than the feature angle (a corner of an
-    outline): vertex nodes, which the curve masks do not round off."""
-    n = len(v)
-    ends = np.concatenate([feature_edges, feature_edges[:, ::-1]])
-    ends = ends[np.argsort(ends[:, 0], kind="stable")]
-    count = np.bincount(ends[:, 0], minlength=n)
-    out = np.zeros(n, bool)
-    two = np.flatnonzero(count == 2)
-    if len(two) == 0:
-        return out
-    first = np.searchsorted(ends[:, 0], two)
-    p, q = ends[first, 1], ends[first + 1, 1]
-    u, w = v[two] - v[p], v[q] - v[two]
-    cos = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
-    out[two[cos < math.cos(math.radians(feature_angle))]] = True
-    return out
-
-
 def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
                      progress: ProgressFn | None = None) -> ButterflyResult:
     """The mesh refined `levels` times by the modified Butterfly scheme (the module's docstring): (4^levels · m,)
@@ -467,7 +346,7 @@ def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
     edges = edge_incidence(t).edges
     n = len(v)
     keys = np.sort(edges[feature, 0] * n + edges[feature, 1])
-    planar = _flat_triangles(v, t, feature)
+    planar = flat_triangles(v, t, feature)
     triangles_in = {"planar": int(planar.sum()), "curved": int((~planar).sum())}
     moved_all, per_level, counts0 = [], [], {}
     planar_now = planar
@@ -486,24 +365,3 @@ def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
     out = Mesh.from_arrays(v, t)
     return ButterflyResult(out, params.levels, counts0, triangles_in, int(feature.sum()),
                            float(moved.max(initial=0.0)), float(moved.mean()) if len(moved) else 0.0, per_level)
-
-
-def _flat_triangles(v: np.ndarray, t: np.ndarray, feature: np.ndarray) -> np.ndarray:
-    """(m,) True for triangles of a smooth region (joined across non-feature edges) whose triangles are coplanar."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    he = _Halfedges.of(t)
-    side = np.arange(3 * len(t))
-    h1 = side[(he.twin >= 0) & (side < he.twin)]
-    keep = ~feature[he.edge[h1]]
-    m = len(t)
-    graph = coo_matrix((np.ones(int(keep.sum())), (h1[keep] // 3, he.twin[h1[keep]] // 3)), shape=(m, m))
-    _, region = connected_components(graph, directed=False)
-    normals = _unit_normals(v, t)
-    ref = np.zeros((region.max() + 1, 3))
-    ref[region] = normals  # any one normal per region
-    ok = np.einsum("ij,ij->i", normals, ref[region]) > math.cos(10 * COPLANAR)
-    bad = np.zeros(region.max() + 1, bool)
-    bad[region[~ok]] = True
-    return ~bad[region]
