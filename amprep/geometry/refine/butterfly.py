@@ -154,11 +154,10 @@ def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndar
     # opposite (wing) vertices: c in a→b's triangle, d in b→a's
     c = t.reshape(-1)[3 * (h_ab // 3) + (h_ab % 3 + 2) % 3]
     d = np.where(h_ba >= 0, t.reshape(-1)[3 * (np.maximum(h_ba, 0) // 3) + (np.maximum(h_ba, 0) % 3 + 2) % 3], -1)
+    inner_flat = surface_edge & flat[h_ab // 3] & flat[np.maximum(h_ba, 0) // 3]  # split at the midpoint
     _curve_masks(v, new, feature, edges, a, b, ca, cb)
-    _surface_masks(v, tgt, he, new, surface_edge, a, b, c, d, h_ab, h_ba, cls, valence, np.where(
+    _surface_masks(v, tgt, he, new, surface_edge & ~inner_flat, a, b, c, d, h_ab, h_ba, cls, valence, np.where(
         feature[:, None], new - mid, np.nan))
-    inner_flat = surface_edge & flat[h_ab // 3] & flat[np.maximum(h_ba, 0) // 3]
-    new[inner_flat] = mid[inner_flat]
     _clamp(v, t, he, new, mid, surface_edge | feature, h_ab, h_ba)
     _unfold(v, t, he.edge.reshape(-1, 3), new, mid)
     moved = np.linalg.norm(new - mid, axis=1)
@@ -271,21 +270,25 @@ def _children(points: np.ndarray, t: np.ndarray, mids: np.ndarray) -> np.ndarray
 def _unfold(v: np.ndarray, t: np.ndarray, edge_of: np.ndarray, new: np.ndarray, mid: np.ndarray) -> None:
     """Where a triangle's child would turn more than ~72° from the triangle (a fold: the new nodes of its sides
     moved past its narrow width), halve those sides' displacements, up to UNFOLD_ROUNDS times, then drop them:
-    the plain split never folds."""
+    the plain split never folds. After the first round only the triangles beside a changed side are looked at."""
     n = len(v)
-    mids = n + edge_of
     parent = unit_normals(v, t)
+    active = np.arange(len(t))
     for round_ in range(UNFOLD_ROUNDS + 1):
-        kids = _children(np.concatenate([v, new]), t, mids)
+        tt, eo = t[active], edge_of[active]
+        kids = _children(np.concatenate([v, new]), tt, n + eo)
         cross = np.cross(kids[:, :, 1] - kids[:, :, 0], kids[:, :, 2] - kids[:, :, 0])
         norm = np.linalg.norm(cross, axis=2)
-        cos = np.einsum("kmj,mj->km", cross, parent) / np.maximum(norm, 1e-300)
-        bad = ((cos < 0.3) & (norm > 0)).any(axis=0) & (np.linalg.norm(parent, axis=1) > 0)
+        cos = np.einsum("kmj,mj->km", cross, parent[active]) / np.maximum(norm, 1e-300)
+        bad = ((cos < 0.3) & (norm > 0)).any(axis=0) & (np.linalg.norm(parent[active], axis=1) > 0)
         if not bad.any():
             return
-        sides = np.unique(edge_of[bad])
+        sides = np.unique(eo[bad])
         factor = 0.5 if round_ < UNFOLD_ROUNDS else 0.0
         new[sides] = mid[sides] + factor * (new[sides] - mid[sides])
+        changed = np.zeros(len(new), bool)
+        changed[sides] = True
+        active = np.flatnonzero(changed[edge_of].any(axis=1))
 
 
 def _side_bulge(he: Halfedges, h_ab: np.ndarray, h_ba: np.ndarray, bulge: np.ndarray) -> np.ndarray:
