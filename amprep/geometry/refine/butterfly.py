@@ -273,8 +273,15 @@ def _unfold(v: np.ndarray, t: np.ndarray, edge_of: np.ndarray, new: np.ndarray, 
     the plain split never folds. After the first round only the triangles beside a changed side are looked at."""
     n = len(v)
     parent = unit_normals(v, t)
-    active = np.arange(len(t))
+    # only a triangle whose sides' nodes moved by a tenth of its lowest height can fold: the others are not looked at
+    moved = np.linalg.norm(new - mid, axis=1)[edge_of].max(axis=1)
+    c = v[t]
+    area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    longest = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2).max(axis=1)
+    active = np.flatnonzero(moved > 0.1 * area2 / np.maximum(longest, 1e-300))
     for round_ in range(UNFOLD_ROUNDS + 1):
+        if len(active) == 0:
+            return
         tt, eo = t[active], edge_of[active]
         kids = _children(np.concatenate([v, new]), tt, n + eo)
         cross = np.cross(kids[:, :, 1] - kids[:, :, 0], kids[:, :, 2] - kids[:, :, 0])
