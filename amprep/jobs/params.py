@@ -127,7 +127,8 @@ KINDS: dict[str, JobKind] = {k.name: k for k in (
                 Param("bounding_box", "bool", True, "Also run the thesis's bounding-box cusp-height method"),
             ) + _SERVICE,
             ("report.json",), "quick", True, "STEP, IGES or BREP (tessellated as convert does), or an STL"),
-    JobKind("refine", "Densify the curved faces whose error is too high (SMA, VTA or adaptive), keeping the mesh closed",
+    JobKind("refine", "Densify the curved faces whose error is too high (SMA, VTA or adaptive), keeping the mesh closed; "
+            "or refine an STL alone (butterfly)",
             _meshing(0.2, "Tolerance of the first tessellation when no STL is given") + _PRINT + (
                 Param("method", "choice", "sma", "sma (the thesis), vta (its baseline), adaptive (error-driven edge "
                       "bisection), or butterfly (an STL alone, no CAD: the modified Butterfly limit surface)",
