@@ -151,6 +151,7 @@ def test_the_twelve_gon_of_fig_9():
     r = butterfly_refine(mesh, ButterflyParams(levels=1, feature_angle=60, flat_faces=False))
     out = r.mesh
     assert r.nodes == {"surface": 7, "curve": 12, "vertex": 0}
+    assert r.triangles_in["on_feature_curves"] == 12 and r.feature_edges == 12  # the rim's triangles and edges
     new = out.vertices[len(mesh.vertices):]
     radius = np.hypot(new[:, 0], new[:, 1])
     boundary = np.isclose(radius, 2 * (9 * np.cos(np.pi / 12) - np.cos(np.pi / 4)) / 8, atol=1e-12)

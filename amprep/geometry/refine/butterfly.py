@@ -357,7 +357,9 @@ def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
     n = len(v)
     keys = np.sort(edges[feature, 0] * n + edges[feature, 1])
     planar = flat_triangles(v, t, feature)
-    triangles_in = {"planar": int(planar.sum()), "curved": int((~planar).sum())}
+    on_curve = feature[edge_incidence(t).edge_of].any(axis=1)
+    triangles_in = {"planar": int(planar.sum()), "curved": int((~planar).sum()),
+                    "on_feature_curves": int(on_curve.sum())}  # a side on a feature curve (of either kind above)
     moved_all, per_level, counts0 = [], [], {}
     planar_now = planar
     corner = sharp_turns(v, edges[feature], params.feature_angle)
