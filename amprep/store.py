@@ -1,7 +1,7 @@
 """Job records in Redis and artifacts in a directory: what the API and the workers share.
 
 Keys (prefix `amprep:`): `job:<id>` a hash per job; `jobs` and `jobs:owner:<owner>` sorted sets by creation
-time (the listing indexes); `events:<id>` a pub/sub channel carrying the job JSON on every change;
+time (the listing indexes); `events:<id>` a pub/sub channel carrying the job JSON on every change (and `{id, owner, deleted}` when deleted);
 `idem:<owner>:<key>` idempotency keys; `result:<fingerprint>` finished results that may be reused;
 `metrics:*` counters for /metrics. Artifacts live in `<data_dir>/jobs/<id>/{input,out}/`.
 """
@@ -31,7 +31,7 @@ DURATION_BUCKETS = (0.5, 1, 2, 5, 10, 30, 60, 300, 900, 3600)
 ANONYMOUS = "anonymous"
 
 MEDIA_TYPES = {".stl": "model/stl", ".3mf": "model/3mf", ".json": "application/json", ".png": "image/png",
-               ".npz": "application/octet-stream", ".csv": "text/csv"}
+               ".npz": "application/octet-stream", ".csv": "text/csv", ".zip": "application/zip"}
 
 # Move a job from one of the allowed states to another, atomically: KEYS[1] job hash; ARGV[1] allowed states
 # (comma separated), ARGV[2] JSON object of fields to set. Returns the old status, or false.
@@ -252,6 +252,7 @@ class JobStore:
         pipe.delete(self.key(job.id))
         pipe.zrem(f"{P}jobs", job.id)
         pipe.zrem(f"{P}jobs:owner:{job.owner}", job.id)
+        pipe.publish(self.channel(job.id), json.dumps({"id": job.id, "owner": job.owner, "deleted": True}))
         pipe.execute()
         shutil.rmtree(self.job_dir(job.id), ignore_errors=True)
 

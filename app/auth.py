@@ -1,7 +1,7 @@
 """The key guard, before any route reads a request's body: with API keys configured, a request without a valid key
 is a 401 at once (an anonymous 150 MB upload is not read first); without keys, the server answers only its own
 machine (loopback clients) unless AMPREP_ALLOW_INSECURE_BIND — however it was started (`amprep serve`, uvicorn,
-Docker). The health checks and the API's own documentation are open."""
+Docker). The health checks, the API's own documentation, the job kinds and the dashboard's pages are open."""
 
 from __future__ import annotations
 
@@ -14,7 +14,14 @@ from amprep.settings import hash_key
 
 from .problems import problem
 
-OPEN_PATHS = frozenset({"/healthz", "/readyz", "/docs", "/docs/oauth2-redirect", "/redoc", "/openapi.json"})
+OPEN_PATHS = frozenset({"/healthz", "/readyz", "/docs", "/redoc", "/openapi.json", "/v1/kinds", "/"})
+#: the dashboard's pages and files hold no data (they call the API with the user's key)
+OPEN_PREFIXES = ("/static/", "/jobs/")
+
+
+def is_open(path: str) -> bool:
+    """True for a path served without a key: health, the API docs, the job kinds, the dashboard's pages and files."""
+    return path in OPEN_PATHS or path.startswith(OPEN_PREFIXES)
 
 
 def _loopback(client: tuple[str, int] | None) -> bool:
@@ -38,7 +45,7 @@ class KeyGuard:
         self.app, self.keys, self.allow_insecure = app, keys, allow_insecure
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["path"] in OPEN_PATHS:
+        if scope["type"] != "http" or is_open(scope["path"]):
             return await self.app(scope, receive, send)
         detail = None
         if self.keys:

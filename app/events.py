@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import json
 from collections.abc import AsyncIterator
+from typing import Any
 
 import redis.asyncio as aioredis
 
@@ -46,3 +48,25 @@ async def wait_for_end(aredis: aioredis.Redis, store: JobStore, job_id: str, tim
     async for job in job_updates(aredis, store, job_id, timeout, owner):
         last = job
     return store.get(job_id) if last is None or last.status not in TERMINAL else last
+
+
+async def owner_updates(aredis: aioredis.Redis, owner: str) -> AsyncIterator[dict[str, Any]]:
+    """Yield every change of the owner's jobs as published (the public job JSON, or `{id, deleted: true}`), forever;
+    an idle 15 s yields `{}` (for the caller's keep-alive and disconnect check)."""
+    pubsub = aioredis.Redis.pubsub(aredis)
+    try:
+        await pubsub.psubscribe(JobStore.channel("*"))
+        while True:
+            msg = await pubsub.get_message(ignore_subscribe_messages=True, timeout=15.0)
+            if msg is None:
+                yield {}
+                continue
+            data = json.loads(msg["data"])
+            if data.get("owner") != owner:
+                continue
+            if data.get("deleted"):
+                yield {"id": data["id"], "deleted": True}
+            else:
+                yield Job(**data).public()
+    finally:
+        await pubsub.aclose()

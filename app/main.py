@@ -20,7 +20,7 @@ from . import problems
 from .auth import KeyGuard
 from .limits import UploadLimit
 from .metrics import StoreCollector
-from .routes import health, jobs
+from .routes import health, jobs, kinds, pages
 
 log = logging.getLogger("amprep.api")
 
@@ -95,13 +95,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         yield
         await app.state.aredis.aclose()
 
-    app = FastAPI(title="amprep", version=__version__, description=DESCRIPTION, lifespan=lifespan,
+    app = FastAPI(title="amprep", version=__version__, description=DESCRIPTION, lifespan=lifespan, docs_url=None,
+                  redoc_url=None,
                   openapi_tags=[{"name": "jobs", "description": "Convert, analyze and refine jobs"},
                                 {"name": "health", "description": "Liveness, readiness and metrics"}])
     problems.install(app)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     app.include_router(health.router)
     app.include_router(jobs.router)
+    app.include_router(kinds.router)
+    app.include_router(pages.router)
+    app.mount("/static", pages.static_files(), name="static")
     app.add_middleware(UploadLimit, limit=s.max_upload_bytes)
     app.add_middleware(KeyGuard, keys=frozenset(s.api_keys), allow_insecure=s.allow_insecure_bind)
     app.add_middleware(AccessLog)

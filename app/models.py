@@ -107,3 +107,42 @@ class Problem(BaseModel):
     instance: str | None = None
     errors: list[dict[str, Any]] | None = None
     job_id: str | None = None
+
+
+class ParamInfo(BaseModel):
+    """One job parameter as its definition gives it (what the dashboard builds its form from)."""
+
+    name: str
+    type: Literal["float", "int", "bool", "choice", "vector3", "ids", "text", "url"]
+    default: Any = Field(description="The default value (null: none)")
+    help: str
+    description: str = Field(description="The help with its unit and bounds, as the API docs and the CLI show it")
+    unit: str
+    gt: float | None = None
+    ge: float | None = None
+    lt: float | None = None
+    le: float | None = None
+    choices: list[str]
+    pattern: str | None = None
+    optional: bool = Field(description="null is allowed")
+    service_only: bool = Field(description="a key of the API only (no CLI option)")
+
+
+class KindInfo(BaseModel):
+    """A job kind: what it does, what it takes and its parameters."""
+
+    name: Kind
+    help: str
+    input_help: str
+    takes_stl: bool = Field(description="the `stl` part is accepted beside `file`")
+    artifacts: list[str] = Field(description="its main artifacts, in order of preference")
+    params: list[ParamInfo]
+
+    @classmethod
+    def of(cls, kind: JobKind) -> KindInfo:
+        params = [ParamInfo(name=p.name, type=p.type, default=list(p.default) if isinstance(p.default, tuple)  # type: ignore[arg-type]
+                            else p.default, help=p.help, description=p.describe(), unit=p.unit, gt=p.gt, ge=p.ge,
+                            lt=p.lt, le=p.le, choices=list(p.choices), pattern=p.pattern, optional=p.optional,
+                            service_only=p.service_only) for p in kind.params]
+        return cls(name=kind.name, help=kind.help, input_help=kind.input_help, takes_stl=kind.takes_stl,  # type: ignore[arg-type]
+                   artifacts=list(kind.artifacts), params=params)

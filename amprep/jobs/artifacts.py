@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.io import plots
 from amprep.geometry.io.stl import write_stl
 from amprep.geometry.io.write import write_mesh
@@ -17,6 +18,17 @@ from amprep.jobs.refine import RefineResult
 
 #: Per-triangle fields for the viewer: little-endian float32, one value per triangle of mesh.stl, NaN = unknown.
 FIELDS = ("chordal_error", "cusp_height")
+#: The CAD face of each triangle for the viewer: little-endian int32 per triangle (-1: none), written with a CAD model.
+FACE_IDS = "face_id.i32"
+
+
+def _face_ids(mesh: Mesh, out_dir: Path) -> list[Path]:
+    """face_id.i32 of a mesh that has CAD faces; nothing for a mesh read from an STL alone."""
+    if not len(mesh.face_ids) or int(mesh.face_ids.max()) < 0:
+        return []
+    p = out_dir / FACE_IDS
+    p.write_bytes(np.asarray(mesh.face_ids, "<i4").tobytes())
+    return [p]
 
 
 def write_analysis(a: Analysis, out_dir: Path, with_plots: bool = True) -> list[Path]:
@@ -32,6 +44,7 @@ def write_analysis(a: Analysis, out_dir: Path, with_plots: bool = True) -> list[
         p = out_dir / f"{name}.f32"
         p.write_bytes(np.asarray(values, "<f4").tobytes())
         paths.append(p)
+    paths += _face_ids(a.mesh, out_dir)
     if with_plots:
         if a.box is not None:
             paths.append(plots.cusp_per_slice(a.box, a.cusp["approximate"]["mean"],
@@ -45,15 +58,18 @@ def write_analysis(a: Analysis, out_dir: Path, with_plots: bool = True) -> list[
 
 def write_refinement(r: RefineResult, out_dir: Path, name: str = "refined.stl", ascii: bool = False,
                      with_plots: bool = True) -> list[Path]:
-    """The refined mesh (STL or 3MF by `name`, in the user's frame), report.json, chordal_error.f32 of the refined
-    mesh and error_vs_size.png; returns their paths (the mesh first)."""
+    """The refined mesh (STL or 3MF by `name`, in the user's frame), report.json, chordal_error.f32 and face_id.i32
+    of the refined mesh, before.stl (the mesh it refined, in the same frame) and error_vs_size.png; returns their
+    paths (the mesh first)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     mesh_path = write_refined_mesh(r, out_dir / name, ascii)
     report = out_dir / "report.json"
     report.write_text(json.dumps(r.report, indent=1, default=float, allow_nan=False))
     field = out_dir / "chordal_error.f32"
     field.write_bytes(np.asarray(r.chordal, "<f4").tobytes())
-    paths = [mesh_path, report, field]
+    before = out_dir / "before.stl"
+    write_stl(r.before, before, header="amprep refine: the mesh before refinement")
+    paths = [mesh_path, report, field, before, *_face_ids(r.mesh, out_dir)]
     if with_plots and r.report.get("comparison"):
         paths.append(plots.error_vs_size(r.report["comparison"], out_dir / "error_vs_size.png"))
     return paths

@@ -43,7 +43,7 @@ from amprep.jobs.common import input_of, is_cad, model_info, provenance, read_me
 @dataclass(frozen=True, eq=False)
 class RefineResult:
     """The refined mesh in the user's frame (`mesh`), the one scored in the CAD's frame (`cad_mesh`), the mesh
-    before, the report, and per-triangle chordal error of `mesh`."""
+    before (in the user's frame, as `mesh`), the report, and per-triangle chordal error of `mesh`."""
 
     mesh: Mesh
     cad_mesh: Mesh
@@ -150,10 +150,11 @@ def _refine_and_report(model: CadModel, mesh: Mesh, surfaces: dict[int, Surface]
     report.update(method=params.method, mesh_before=mesh_before.to_json(),
                   refined_faces=refined_faces(faces, before, analysis.faces, chosen, ref), comparison=comparison,
                   provenance=provenance(mesh_params))
-    user_frame = out
+    user_frame, user_before = out, mesh
     if placed is not None:
         report["alignment"] = placed.alignment()
         R, t = np.asarray(placed.fit.rotation), np.asarray(placed.fit.translation)
         user_frame = replace(out, vertices=(out.vertices - t) @ R)  # x_user = Rᵀ (x_cad − t)
+        user_before = replace(mesh, vertices=(mesh.vertices - t) @ R)
     prog("done", 1.0)
-    return RefineResult(user_frame, out, mesh, report, analysis.chordal, surfaces, faces)
+    return RefineResult(user_frame, out, user_before, report, analysis.chordal, surfaces, faces)

@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import json
+import os
+import tempfile
+import zipfile
+from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, Header, Query, Request, UploadFile
 from fastapi.responses import FileResponse, JSONResponse, Response
 from pydantic import ValidationError
 from sse_starlette.sse import EventSourceResponse
+from starlette.background import BackgroundTask
 from starlette.concurrency import run_in_threadpool
 
 from amprep import callbacks
@@ -18,7 +23,7 @@ from amprep.queue import CALLBACK_TASK, TASK_OF_KIND
 from amprep.store import TERMINAL, Job, fingerprint, new_job_id, now
 
 from ..deps import CeleryDep, OwnerDep, StoreDep
-from ..events import job_updates, wait_for_end
+from ..events import job_updates, owner_updates, wait_for_end
 from ..models import PARAMS_MODEL, JobList, JobPublic, Kind, Problem, Status
 from ..problems import ApiError, problem
 from ..uploads import require_cad, require_stl, sniff, store_upload
@@ -284,5 +289,49 @@ async def job_events(job_id: str, request: Request, store: StoreDep, owner: Owne
             if key != last:
                 last = key
                 yield {"event": "job", "id": f"{job.status}:{job.progress}", "data": json.dumps(job.public())}
+
+    return EventSourceResponse(stream(), ping=10)
+
+
+def _zip(job: Job, store: Any) -> Path:
+    """A temporary zip of the job's artifacts (deflated, level 1: meshes compress by half at little cost)."""
+    tmp = store.root.parent / "tmp"
+    tmp.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f"{job.id}-", suffix=".zip", dir=tmp)
+    os.close(fd)
+    with zipfile.ZipFile(name, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+        for a in job.artifacts:
+            zf.write(store.artifact_path(job.id, a["name"]), arcname=a["name"])
+    return Path(name)
+
+
+@router.get("/jobs/{job_id}/archive", operation_id="get_archive", summary="Every artifact of a job in one zip",
+            response_class=FileResponse,
+            responses={200: {"content": {"application/zip": {}}, "description": "A zip of the job's artifacts"},
+                       **PROBLEMS})
+async def get_archive(job_id: str, request: Request, store: StoreDep, owner: OwnerDep) -> Response:
+    request.state.job_id = job_id
+    job = _own(store, job_id, owner)
+    if not job.artifacts:
+        raise ApiError(404, ErrorCode.NOT_FOUND, f"job {job_id} has no artifacts ({job.status})")
+    path = await run_in_threadpool(_zip, job, store)
+    return FileResponse(path, media_type="application/zip", filename=f"amprep-{job.kind}-{job.id}.zip",
+                        background=BackgroundTask(path.unlink, missing_ok=True))
+
+
+@router.get("/events", operation_id="owner_events", summary="Server-sent events: every change of any of your jobs",
+            response_class=EventSourceResponse,
+            responses={200: {"content": {"text/event-stream": {}}, "description": "`event: job` with the job JSON on "
+                             "every change of one of your jobs, `event: deleted` with `{id}` when one is deleted; "
+                             "the stream does not end"}, 401: PROBLEMS[401], 503: PROBLEMS[503]})
+async def owner_events(request: Request, owner: OwnerDep) -> EventSourceResponse:
+    aredis = request.app.state.aredis
+
+    async def stream():  # type: ignore[no-untyped-def]
+        async for change in owner_updates(aredis, owner):
+            if change.get("deleted"):
+                yield {"event": "deleted", "data": json.dumps({"id": change["id"]})}
+            elif change:
+                yield {"event": "job", "data": json.dumps(change)}
 
     return EventSourceResponse(stream(), ping=10)

@@ -27,6 +27,7 @@ def test_every_route_and_model_is_documented():
     for name in ("JobPublic", "Problem", "ConvertParams", "AnalyzeParams", "RefineParams"):
         assert "examples" in schemas[name], name
     public = {"/v1/jobs", "/v1/jobs/{job_id}", "/v1/jobs/{job_id}/artifacts/{name}", "/v1/jobs/{job_id}/events",
+              "/v1/jobs/{job_id}/archive", "/v1/kinds", "/v1/events",
               "/healthz", "/readyz", "/metrics"}
     assert public == set(spec["paths"])
     assert set(spec["x-params-by-kind"]) == {"convert", "analyze", "refine"}

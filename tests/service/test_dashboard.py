@@ -1,0 +1,277 @@
+"""The dashboard in a real browser (Debian's Chromium driven by Playwright) against the real service: upload through
+the page, the live list, the 3D view's pixels, error colouring, a defect highlighted, downloads that are the job's
+artifacts, the API docs — and not one request to another host."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from amprep.geometry.io.stl import read_stl, write_stl
+from tests.conftest import corpus
+
+from .browser import (
+    ARGS,
+    chromium_path,
+    drawn_fraction,
+    guard_host,
+    have_browser,
+    near_colour,
+    pixels,
+    saturated_fraction,
+)
+from .conftest import KEY_A, Service, submit, wait_status
+
+ROOT = Path(__file__).resolve().parents[2]
+SHOTS = Path(os.environ.get("AMPREP_TEST_ARTIFACTS", ROOT / "test-artifacts")) / "dashboard"
+HIGHLIGHT = (0xFF, 0xD4, 0x00)
+LONG = 180_000  # ms: a busy 2-core machine runs the worker, the API and the browser at once
+
+
+@pytest.fixture(scope="module")
+def browser():
+    have_browser()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=chromium_path(), args=ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def page(browser, service: Service):
+    """A fresh page on the service whose requests to any other host fail the test."""
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    context = browser.new_context(viewport={"width": 1280, "height": 860}, accept_downloads=True)
+    pg = context.new_page()
+    outside: list[str] = []
+    errors: list[str] = []
+    guard_host(pg, service.url, outside)
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    pg.set_default_timeout(LONG)
+    yield pg
+    context.close()
+    assert not outside, f"the page asked another host: {outside[:5]}"
+    assert not errors, f"script errors: {errors[:5]}"
+
+
+def view_pixels(pg, selector: str = "#view-main") -> np.ndarray:  # type: ignore[no-untyped-def]
+    return pixels(pg.locator(f"{selector} canvas").screenshot())
+
+
+def wait_drawn(pg, selector: str = "#view-main") -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The view's pixels once its first frame is drawn (the page marks data-ready on the first frame)."""
+    pg.wait_for_selector(f"{selector}[data-ready=true]")
+    return view_pixels(pg, selector)
+
+
+def test_upload_watch_view_colour_download(page, service: Service) -> None:
+    """Upload a STEP through the page as an analyze job, see it reach succeeded in the live list, open it: the
+    canvas shows the part; colouring by chordal error changes the pixels; mesh.stl downloads byte for byte."""
+    step = corpus("voron_vhb_din_mount.step")
+    page.goto(service.url + "/")
+    page.select_option("#kind", "analyze")
+    page.set_input_files("#file", str(step))
+    page.click("#submit")
+    row = page.locator("#jobs tbody tr", has_text=step.name).first
+    row.locator(".badge.succeeded").wait_for()  # no reload: the row changes by server-sent events
+    page.screenshot(path=str(SHOTS / "jobs.png"))
+    job_id = row.get_attribute("data-job")
+    row.locator("td.name a").click()
+    page.wait_for_url(f"**/jobs/{job_id}")
+    plain = wait_drawn(page)
+    assert drawn_fraction(plain) > 0.03, "the canvas shows no part"
+    assert saturated_fraction(plain) < 0.01, "the plain view is grey"
+    page.select_option("#colour", "chordal_error")
+    page.wait_for_selector("#view-main[data-colour=chordal_error]")
+    page.wait_for_function("() => window.amprep.viewers.at(-1).frames > 1")
+    page.wait_for_timeout(300)
+    coloured = view_pixels(page)
+    assert saturated_fraction(coloured) > 0.02, "colouring by chordal error left the part grey"
+    assert (np.abs(coloured.astype(int) - plain.astype(int)).max(axis=2) > 24).mean() > 0.02
+    assert page.locator("#legend").is_visible() and "mm" in page.locator("#legend").inner_text()
+    page.screenshot(path=str(SHOTS / "job.png"))
+    with page.expect_download() as dl:
+        page.click("button[data-artifact='mesh.stl']")
+    got = Path(dl.value.path()).read_bytes()
+    art = next(a for a in service.client().get(f"/v1/jobs/{job_id}").json()["artifacts"] if a["name"] == "mesh.stl")
+    assert hashlib.sha256(got).hexdigest() == art["sha256"]
+    with page.expect_download() as dl:
+        page.click("#zip")
+    import zipfile
+
+    with zipfile.ZipFile(dl.value.path()) as zf:
+        assert hashlib.sha256(zf.read("mesh.stl")).hexdigest() == art["sha256"]
+        assert {"report.json", "chordal_error.f32", "face_id.i32"} <= set(zf.namelist())
+
+
+def test_pick_shows_face(page, service: Service) -> None:
+    """Clicking the middle of the part shows a triangle of a CAD face with its surface type and errors."""
+    with service.client() as c:
+        job = c.post("/v1/jobs", params={"wait": 120}, data={"kind": "analyze", "params": '{"bounding_box": false}'},
+                     files={"file": ("din.step", corpus("voron_vhb_din_mount.step").read_bytes())}).json()
+    page.goto(f"{service.url}/jobs/{job['id']}")
+    wait_drawn(page)
+    page.wait_for_selector("#colour:not([disabled])")
+    box = page.locator("#view-main canvas").bounding_box()
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.wait_for_selector("#pick[data-triangle]")
+    text = page.locator("#pick").inner_text()
+    assert "CAD face" in text and any(t in text for t in ("plane", "cylinder", "cone")), text
+    assert "chordal error" in text
+    assert near_colour(view_pixels(page), HIGHLIGHT) > 0, "the picked triangle is not marked"
+
+
+def test_open_stl_defect_highlighted(page, service: Service, tmp_path: Path) -> None:
+    """An STL with holes: its boundary loops are listed; selecting one draws it in the highlight colour."""
+    mesh = read_stl(corpus("voron_vhb_din_mount.stl"))
+    keep = np.ones(mesh.n_triangles, bool)
+    keep[[5, 400, 900]] = False
+    holed = tmp_path / "holed.stl"
+    write_stl(type(mesh).from_arrays(mesh.vertices, mesh.triangles[keep]), holed)
+    with service.client() as c:
+        job = submit(c, holed, "analyze", '{"bounding_box": false}').json()
+        job = wait_status(c, job["id"], ("succeeded", "failed"), 180)
+    assert job["status"] == "succeeded", job
+    page.goto(f"{service.url}/jobs/{job['id']}")
+    wait_drawn(page)
+    items = page.locator("#defects button")
+    items.first.wait_for()
+    assert items.count() >= 3 and all("Boundary loop" in items.nth(i).inner_text() for i in range(3))
+    before = near_colour(view_pixels(page), HIGHLIGHT)
+    items.nth(1).click()
+    page.wait_for_selector("#view-main[data-selected='1']")
+    page.wait_for_timeout(300)
+    after = near_colour(view_pixels(page), HIGHLIGHT)
+    assert items.nth(1).get_attribute("aria-pressed") == "true"
+    assert after > before + 20, (before, after)
+    page.screenshot(path=str(SHOTS / "defect.png"))
+
+
+def test_refine_before_after(page, service: Service) -> None:
+    """A refine job's page shows the mesh before and after side by side, both drawn."""
+    with service.client() as c:
+        job = c.post("/v1/jobs", params={"wait": 170}, data={"kind": "refine", "params": '{"method": "butterfly"}'},
+                     files={"file": ("din.stl", corpus("voron_vhb_din_mount.stl").read_bytes())}).json()
+    assert job["status"] == "succeeded", job
+    page.goto(f"{service.url}/jobs/{job['id']}")
+    after = wait_drawn(page)
+    before = view_pixels(page, "#view-before")
+    assert drawn_fraction(before) > 0.03 and drawn_fraction(after) > 0.03
+    assert int(page.locator("#view-before").get_attribute("data-triangles")) * 4 == int(
+        page.locator("#view-main").get_attribute("data-triangles"))
+
+
+def test_form_from_definitions(page, service: Service) -> None:
+    """The form's fields are the kind's parameters with their defaults and bounds; a value out of bounds is refused
+    in the page, before any upload."""
+    kinds = {k["name"]: k for k in service.client().get("/v1/kinds").json()}
+    page.goto(service.url + "/")
+    page.select_option("#kind", "convert")
+    for p in kinds["convert"]["params"]:
+        field = page.locator(f"#p-convert-{p['name']}")
+        assert field.count() == 1, p["name"]
+        if p["type"] in ("float", "int") and p["default"] is not None:
+            assert float(field.get_attribute("placeholder")) == p["default"]
+    page.click("#submit-form summary")
+    page.fill("#p-convert-tolerance", "1000")
+    page.set_input_files("#file", str(corpus("voron_vhb_din_mount.stl")))
+    n = len(service.client().get("/v1/jobs").json()["jobs"])
+    page.click("#submit")
+    assert "≤ 100" in page.locator("#p-convert-tolerance-error").inner_text()
+    assert "tolerance" in page.locator("#submit-message").inner_text()
+    assert len(service.client().get("/v1/jobs").json()["jobs"]) == n
+
+
+def test_cancel_and_delete_from_list(page, service: Service) -> None:
+    """Delete removes an ended job's row (and the job) without a reload."""
+    with service.client() as c:
+        job = submit(c, corpus("voron_vhb_din_mount.stl"), "convert", wait=60).json()
+    page.goto(service.url + "/")
+    row = page.locator(f"#jobs tr[data-job='{job['id']}']")
+    row.wait_for()
+    row.get_by_role("button", name="Delete").click()
+    row.wait_for(state="detached")
+    assert service.client().get(f"/v1/jobs/{job['id']}").status_code == 404
+
+
+def test_api_docs_served_locally(page, service: Service) -> None:
+    """/docs and /redoc draw the API from this server's own files."""
+    page.goto(service.url + "/docs")
+    page.wait_for_selector(".opblock")
+    assert page.locator(".opblock").count() >= 8
+    page.goto(service.url + "/redoc")
+    page.locator("h2", has_text="Submit a file for convert").first.wait_for()
+
+
+def test_api_key_in_session(browser, service: Service, keyed_api: str) -> None:
+    """On a keyed server the page asks for the key, keeps it for the session and lists that key's jobs only."""
+    import httpx
+
+    with httpx.Client(base_url=keyed_api, headers={"Authorization": f"Bearer {KEY_A}"}, timeout=120) as c:
+        mine = submit(c, corpus("voron_vhb_din_mount.stl"), "convert").json()
+    context = browser.new_context()
+    pg = context.new_page()
+    outside: list[str] = []
+    guard_host(pg, keyed_api, outside)
+    pg.set_default_timeout(LONG)
+    pg.goto(keyed_api + "/")
+    pg.wait_for_selector("#api-key")
+    pg.fill("#api-key", KEY_A)
+    pg.click(".keybar button")
+    pg.locator(f"#jobs tr[data-job='{mine['id']}']").wait_for()
+    assert pg.evaluate("() => sessionStorage.getItem('amprep.apiKey')") == KEY_A
+    pg.goto(f"{keyed_api}/jobs/{mine['id']}")
+    pg.wait_for_selector("#view-main[data-ready=true]")
+    context.close()
+    assert not outside
+
+
+def test_owner_events_stream(service: Service, keyed_api: str) -> None:
+    """GET /v1/events carries every change of the caller's jobs (and their deletion), and none of another key's."""
+    import json
+    import threading
+
+    import httpx
+
+    from .conftest import KEY_B
+
+    seen: list[tuple[str, dict]] = []
+    opened = threading.Event()
+
+    def listen() -> None:
+        with httpx.Client(base_url=keyed_api, headers={"Authorization": f"Bearer {KEY_A}"}, timeout=None) as c:
+            with c.stream("GET", "/v1/events") as r:
+                assert r.status_code == 200 and r.headers["content-type"].startswith("text/event-stream")
+                opened.set()
+                event = None
+                for line in r.iter_lines():
+                    if line.startswith("event:"):
+                        event = line[6:].strip()
+                    elif line.startswith("data:"):
+                        seen.append((event or "", json.loads(line[5:])))
+                        if event == "deleted":
+                            return
+
+    t = threading.Thread(target=listen, daemon=True)
+    t.start()
+    assert opened.wait(60)
+    with httpx.Client(base_url=keyed_api, timeout=120) as c:
+        other = submit(c, corpus("voron_vhb_din_mount.stl"), "convert", headers={"Authorization": f"Bearer {KEY_B}"},
+                       wait=60).json()
+        c.headers["Authorization"] = f"Bearer {KEY_A}"
+        mine = submit(c, corpus("voron_vhb_din_mount.stl"), "convert", '{"tolerance": 0.07}', wait=60).json()
+        assert mine["status"] == "succeeded"
+        assert c.delete(f"/v1/jobs/{mine['id']}").status_code == 204
+    t.join(60)
+    assert not t.is_alive(), seen
+    ids = {d["id"] for _, d in seen}
+    assert ids == {mine["id"]}, "another key's job was streamed" if other["id"] in ids else seen
+    statuses = [d["status"] for e, d in seen if e == "job"]
+    assert statuses[0] == "queued" and "succeeded" in statuses and seen[-1][0] == "deleted"
+    assert httpx.get(keyed_api + "/v1/events", timeout=30).status_code == 401
