@@ -2,7 +2,8 @@
 
     cd frontend && python build.py        # npm ci, esbuild bundles, vendored API-docs files, BUILD.json
 
-- dist/dashboard.js, dist/job.js: src/*.js bundled with three.js by esbuild (minified ES modules).
+- dist/dashboard.js, dist/job.js, dist/lod.js (a worker of job.js): src/*.js bundled with three.js by esbuild
+  (minified ES modules).
 - vendor/: swagger-ui-bundle.js, swagger-ui.css (for /docs) and redoc.standalone.js (for /redoc), copied from
   node_modules at the versions package-lock.json pins; Redoc's one request to its CDN (a logo) is replaced by an
   empty inline image.
@@ -21,7 +22,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 STATIC = HERE.parent / "app" / "static"
-ENTRIES = ("dashboard.js", "job.js")
+ENTRIES = ("dashboard.js", "job.js", "lod.js")  # lod.js: the job page's worker
 #: run-time requests to other hosts inside vendored files, replaced so the pages load nothing from elsewhere
 OFFLINE = {"redoc.standalone.js": [("https://cdn.redoc.ly/redoc/logo-mini.svg",  # the sidebar's "by Redocly" logo
                                    "data:image/svg+xml,%3Csvg xmlns='http://www.w3.org/2000/svg'/%3E")]}

@@ -137,6 +137,7 @@ async function viewer(job) {
     page.firstFrame = performance.now() - t0;  // ms from asking for the mesh to its first frame
     page.firstFrameAt = performance.now();  // ms since the page started loading
     box.dataset.ready = 'true';
+    setTimeout(() => page.viewers.forEach((w) => w.timeFrame()), 0);
   };
   v.request();
   for (const n of Object.keys(FIELD_NAMES)) page.fields[n] = await field(`${n}.f32`);

@@ -7,7 +7,8 @@ export function isBinary(buffer) {
   return 84 + 50 * n === buffer.byteLength;
 }
 
-function normals(pos) {
+/** Flat per-corner normals (9m int8, ×127) of a triangle soup's positions (9m). */
+export function normals(pos) {
   const m = pos.length / 9;
   const nrm = new Int8Array(pos.length);
   for (let t = 0; t < m; t++) {

@@ -1,5 +1,7 @@
 // The 3D view: one triangle soup (non-indexed, flat normals, per-corner colours) drawn on demand with a headlight,
-// orbit / pan / zoom, fit, wireframe, defect overlays, a highlighted selection and triangle picking.
+// orbit / pan / zoom, fit, wireframe, defect overlays, a highlighted selection and triangle picking. A mesh whose
+// full frame takes longer than FRAME_MS is drawn from a lighter copy (lod.js, in a worker) while the view moves,
+// and in full as soon as it stops.
 
 import {
   BufferAttribute, BufferGeometry, Box3, Color, Float32BufferAttribute, LineBasicMaterial, LineSegments, Mesh,
@@ -8,8 +10,11 @@ import {
 } from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import { BASE, fieldColours } from './colours.js';
+import { normals } from './stl.js';
 
 export const HIGHLIGHT = 0xffd400;
+export const FRAME_MS = 30;  // a full frame slower than this gets a moving copy sized to draw within it
+const SETTLE_MS = 180;  // the full mesh is drawn again this long after the last move
 export const DEFECT = 0xd0021b;
 
 // Lambert shading by a light at the eye, computed per vertex: the cheapest shading that still shows the shape,
@@ -19,7 +24,7 @@ attribute vec3 color;
 varying vec3 vColour;
 void main() {
   vec3 n = normalize(normalMatrix * normal);
-  float l = 0.28 + 0.72 * abs(n.z);
+  float l = 0.4 + 0.6 * abs(n.z);
   vColour = color * l;
   gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
 }`;
@@ -44,10 +49,12 @@ export class Viewer {
     this.camera = new PerspectiveCamera(35, 1, 0.1, 1000);
     this.camera.up.set(0, 0, 1);  // CAD parts are modelled z-up
     this.controls = new OrbitControls(this.camera, canvas);
-    this.controls.addEventListener('change', () => { this.request(); this.onView?.(this); });
+    this.controls.addEventListener('change', () => { this.moved(); this.onView?.(this); });
     this.overlay = [];
     this.frames = 0;
     this.pending = false;
+    const forced = Number(new URLSearchParams(location.search).get('frame_ms'));  // ?frame_ms=N: another budget
+    this.frameMs = Number.isFinite(forced) && forced > 0 ? forced : undefined;
     new ResizeObserver(() => this.resize()).observe(container);
     canvas.addEventListener('keydown', (e) => this.key(e));
     this.resize();
@@ -62,15 +69,72 @@ export class Viewer {
   }
 
   request() {
-    if (this.pending) return;
+    if (this.pending || this.spinning) return;
     this.pending = true;
     requestAnimationFrame(() => { this.pending = false; this.draw(); });
   }
 
   draw() {
+    const light = this.lod && this.moving;
+    if (this.lod) { this.mesh.visible = !light; this.lod.visible = light; }
     this.renderer.render(this.scene, this.camera);
     this.frames += 1;
     this.onDraw?.(this);
+  }
+
+  /** The view moved: draw the light copy now, the full mesh once it has settled. */
+  moved() {
+    this.moving = true;
+    clearTimeout(this.settle);
+    this.settle = setTimeout(() => { this.moving = false; this.request(); }, SETTLE_MS);
+    this.request();
+  }
+
+  /** Time full frames as the screen shows them (rAF to rAF, three in a row); when one takes over FRAME_MS, build
+   * the moving copy in a worker, sized so a frame of it should fit in FRAME_MS. */
+  async timeFrame() {
+    const gl = this.renderer.getContext();
+    const frame = () => new Promise((r) => requestAnimationFrame(() => {
+      this.renderer.render(this.scene, this.camera);
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+      r(performance.now());
+    }));
+    const t0 = await frame();
+    let t = t0;
+    for (let k = 0; k < 3; k++) t = await frame();
+    this.fullMs = (t - t0) / 3;
+    const budget = this.frameMs ?? FRAME_MS;
+    if (this.fullMs <= budget || this.count < 20000) return null;
+    const target = Math.max(5000, Math.floor((this.count * budget * 0.7) / Math.max(this.fullMs, 1e-3)));
+    const positions = this.mesh.geometry.getAttribute('position').array.slice();
+    return new Promise((resolve) => {
+      const worker = new Worker(new URL('./lod.js', import.meta.url), { type: 'module' });
+      worker.onmessage = (e) => { worker.terminate(); this.setLod(e.data); resolve(this.lod); };
+      worker.onerror = () => { worker.terminate(); resolve(null); };
+      worker.postMessage({ positions, target }, [positions.buffer]);
+    });
+  }
+
+  setLod({ positions, orig }) {
+    const g = new BufferGeometry();
+    g.setAttribute('position', new BufferAttribute(positions, 3));
+    g.setAttribute('normal', new BufferAttribute(normals(positions), 3, true));
+    g.setAttribute('color', new BufferAttribute(new Uint8Array(positions.length), 3, true));
+    g.computeBoundingSphere();
+    this.lodOrig = orig;
+    this.lod = new Mesh(g, this.material);
+    this.lod.visible = false;
+    this.scene.add(this.lod);
+    this.copyColours();
+    this.container.dataset.moving = String(orig.length);
+  }
+
+  copyColours() {  // the moving copy's corners take the colours of the triangles they came from
+    if (!this.lod) return;
+    const src = this.mesh.geometry.getAttribute('color').array;
+    const dst = this.lod.geometry.getAttribute('color');
+    for (let j = 0; j < this.lodOrig.length; j++) dst.array.set(src.subarray(9 * this.lodOrig[j], 9 * this.lodOrig[j] + 9), 9 * j);
+    dst.needsUpdate = true;
   }
 
   /** Show an STL parsed by stl.parseSTL; the camera fits it. */
@@ -95,6 +159,7 @@ export class Viewer {
     const attr = this.mesh.geometry.getAttribute('color');
     attr.array.set(fieldColours(this.count, values, lo, hi));
     attr.needsUpdate = true;
+    this.copyColours();
     this.request();
   }
 
@@ -162,19 +227,23 @@ export class Viewer {
     if (actions[e.key]) { e.preventDefault(); actions[e.key](); c.update(); }
   }
 
-  /** Turn continuously for `seconds` and resolve with the frames per second drawn (for bench/dashboard.py). */
-  spin(seconds) {
+  /** Turn continuously for `seconds` as a user's drag does (the moving copy when there is one, or the full mesh
+   * with `full`); resolves with the frames per second drawn, each finished before the next (bench/dashboard.py). */
+  spin(seconds, full = false) {
     return new Promise((resolve) => {
       const t0 = performance.now(); let frames = 0;
+      const gl = this.renderer.getContext();
+      this.spinning = true;
       const step = () => {
         rotate(this, 0.02, 0);
         this.controls.update();
-        this.renderer.render(this.scene, this.camera);
-        const gl = this.renderer.getContext();
-        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));  // wait for the frame to finish
+        this.moving = !full;
+        this.draw();
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
         frames += 1;
         const dt = (performance.now() - t0) / 1000;
-        if (dt < seconds) requestAnimationFrame(step); else resolve(frames / dt);
+        if (dt < seconds) { requestAnimationFrame(step); return; }
+        this.spinning = false; this.moving = false; this.request(); resolve(frames / dt);
       };
       requestAnimationFrame(step);
     });
@@ -202,13 +271,13 @@ function rotate(v, dTheta, dPhi) {
   if (dPhi) offset.applyAxisAngle(side, dPhi);
   v.camera.position.copy(v.controls.target).add(offset);
   v.camera.lookAt(v.controls.target);
-  v.request();
+  v.moved();
 }
 
 function zoom(v, f) {
   const offset = v.camera.position.clone().sub(v.controls.target).multiplyScalar(f);
   v.camera.position.copy(v.controls.target).add(offset);
-  v.request();
+  v.moved();
 }
 
 export { Box3, Vector3, BASE };

@@ -275,3 +275,84 @@ def test_owner_events_stream(service: Service, keyed_api: str) -> None:
     statuses = [d["status"] for e, d in seen if e == "job"]
     assert statuses[0] == "queued" and "succeeded" in statuses and seen[-1][0] == "deleted"
     assert httpx.get(keyed_api + "/v1/events", timeout=30).status_code == 401
+
+
+def test_moving_copy_while_turning(page, service: Service, tmp_path: Path) -> None:
+    """A mesh too slow to turn in full is drawn from a lighter copy while it moves (forced here with a frame budget
+    of 1 µs): the copy is built, shows the part, carries each source triangle's colour, and the full mesh is back
+    once the view settles."""
+    from bench.dashboard import torus
+
+    stl = tmp_path / "torus.stl"
+    write_stl(torus(200, 60), stl)  # 24,000 triangles
+    with service.client() as c:
+        job = submit(c, stl, "analyze", '{"bounding_box": false}').json()
+        job = wait_status(c, job["id"], ("succeeded", "failed"), 180)
+    assert job["status"] == "succeeded", job
+    page.goto(f"{service.url}/jobs/{job['id']}?frame_ms=0.001")
+    wait_drawn(page)
+    page.wait_for_function("() => window.amprep.viewers.at(-1).lod")
+    n = page.evaluate("() => window.amprep.viewers.at(-1).lodOrig.length")
+    assert 1000 < n < 12_000, n
+    page.select_option("#colour", "cusp_height")
+    page.wait_for_selector("#view-main[data-colour=cusp_height]")
+    same = page.evaluate("""() => { const v = window.amprep.viewers.at(-1);
+        const full = v.mesh.geometry.getAttribute('color').array, lod = v.lod.geometry.getAttribute('color').array;
+        let ok = 0; for (let j = 0; j < v.lodOrig.length; j += 97) { const t = v.lodOrig[j];
+          ok += [0, 1, 2, 3, 4, 5, 6, 7, 8].every((k) => lod[9 * j + k] === full[9 * t + k]) ? 1 : 0; }
+        return [ok, Math.ceil(v.lodOrig.length / 97)]; }""")
+    assert same[0] == same[1] and same[1] > 10
+    page.evaluate("() => { const v = window.amprep.viewers.at(-1); v.spinning = true; v.moving = true; v.draw(); }")
+    assert page.evaluate("() => { const v = window.amprep.viewers.at(-1); return v.lod.visible && !v.mesh.visible; }")
+    assert drawn_fraction(view_pixels(page)) > 0.03, "the moving copy shows nothing"
+    page.evaluate("() => { const v = window.amprep.viewers.at(-1); v.spinning = false; v.moved(); }")
+    page.wait_for_function("() => { const v = window.amprep.viewers.at(-1); return v.mesh.visible && !v.lod.visible; }")
+
+
+CONTRAST = """() => {
+  const rgb = (s) => (s.match(/[\\d.]+/g) || []).map(Number);
+  const lum = ([r, g, b]) => { const f = (c) => { c /= 255; return c <= 0.03928 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4; };
+    return 0.2126 * f(r) + 0.7152 * f(g) + 0.0722 * f(b); };
+  const bg = (e) => { for (; e; e = e.parentElement) { const c = rgb(getComputedStyle(e).backgroundColor);
+    if (c.length === 3 || c[3] > 0.5) return c.slice(0, 3); } return [255, 255, 255]; };
+  const bad = [];
+  const walker = document.createTreeWalker(document.body, NodeFilter.SHOW_TEXT);
+  for (let n = walker.nextNode(); n; n = walker.nextNode()) {
+    const e = n.parentElement;
+    if (!n.textContent.trim() || !e || !e.getClientRects().length) continue;
+    const st = getComputedStyle(e);
+    if (st.visibility === 'hidden' || e.closest('.sr-only,[hidden],canvas')) continue;
+    const a = lum(rgb(st.color).slice(0, 3)), b = lum(bg(e));
+    const ratio = (Math.max(a, b) + 0.05) / (Math.min(a, b) + 0.05);
+    const large = parseFloat(st.fontSize) >= 24 || (parseFloat(st.fontSize) >= 18.66 && Number(st.fontWeight) >= 700);
+    if (ratio < (large ? 3 : 4.5)) bad.push(`${n.textContent.trim().slice(0, 30)}: ${ratio.toFixed(2)}`);
+  }
+  return bad;
+}"""
+
+
+@pytest.mark.parametrize("viewport", [(1280, 800), (768, 1024)], ids=["laptop", "tablet"])
+def test_readable_and_keyboard_reachable(browser, service: Service, viewport: tuple[int, int]) -> None:
+    """Both pages fit a laptop and a tablet (no sideways scrolling of the page), all visible text passes WCAG AA
+    contrast, and the form is reachable by Tab alone."""
+    with service.client() as c:
+        job = submit(c, corpus("voron_vhb_din_mount.step"), "analyze", '{"bounding_box": false}', wait=120).json()
+    context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    pg = context.new_page()
+    outside: list[str] = []
+    guard_host(pg, service.url, outside)
+    pg.set_default_timeout(LONG)
+    for url in (service.url + "/", f"{service.url}/jobs/{job['id']}"):
+        pg.goto(url)
+        pg.wait_for_selector("#jobs tbody tr" if url.endswith("/") else "#view-main[data-ready=true]")
+        assert pg.evaluate("() => document.documentElement.scrollWidth <= window.innerWidth + 1"), url
+        assert pg.evaluate(CONTRAST) == [], url
+    pg.goto(service.url + "/")
+    pg.wait_for_selector("#jobs tbody tr")
+    reached = set()
+    for _ in range(40):
+        pg.keyboard.press("Tab")
+        reached.add(pg.evaluate("() => document.activeElement.id || document.activeElement.tagName"))
+    assert {"file", "kind", "submit", "filter-status", "filter-kind"} <= reached, reached
+    context.close()
+    assert not outside
