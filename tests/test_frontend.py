@@ -23,7 +23,7 @@ def _build_module():  # type: ignore[no-untyped-def]
 
 
 def test_bundles_are_built_from_the_current_sources():
-    recorded = json.loads((STATIC / "dist" / "BUILD.json").read_text())
+    recorded = json.loads((STATIC / "dist" / "BUILD.json").read_text(encoding="utf-8"))
     assert recorded["sources"] == _build_module().source_hashes(), "frontend/src changed: run `python frontend/build.py`"
     for entry in _build_module().ENTRIES:
         assert (STATIC / "dist" / entry).stat().st_size > 1000
@@ -31,7 +31,7 @@ def test_bundles_are_built_from_the_current_sources():
 
 def test_pages_load_only_local_files():
     for page in ("index.html", "job.html"):
-        html = (STATIC / page).read_text()
+        html = (STATIC / page).read_text(encoding="utf-8")
         refs = re.findall(r'(?:src|href)="([^"]+)"', html)
         assert refs and all(r.startswith("/") and not r.startswith("//") for r in refs), refs
         for r in refs:

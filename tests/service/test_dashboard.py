@@ -188,16 +188,30 @@ def test_form_from_definitions(page, service: Service) -> None:
     assert len(service.client().get("/v1/jobs").json()["jobs"]) == n
 
 
-def test_cancel_and_delete_from_list(page, service: Service) -> None:
-    """Delete removes an ended job's row (and the job) without a reload."""
+def test_cancel_filter_and_delete_from_list(page, service: Service) -> None:
+    """Cancel a running and a queued job from their rows, filter the list by status and kind, delete an ended job:
+    each row changes or goes without a reload."""
     with service.client() as c:
-        job = submit(c, corpus("voron_vhb_din_mount.stl"), "convert", wait=60).json()
+        busy = submit(c, corpus("nist_ctc02_ap242.stp"), params='{"tolerance": 0.01, "reuse": false}').json()
+        queued = submit(c, corpus("voron_vhb_din_mount.step"), params='{"reuse": false, "tolerance": 0.09}').json()
+        wait_status(c, busy["id"], ("running",))
     page.goto(service.url + "/")
-    row = page.locator(f"#jobs tr[data-job='{job['id']}']")
-    row.wait_for()
+    for job in (queued, busy):
+        row = page.locator(f"#jobs tr[data-job='{job['id']}']")
+        row.get_by_role("button", name="Cancel").click()
+        row.locator(".badge.cancelled").wait_for()
+        assert "cancelled" in row.locator(".stage").inner_text()
+    page.select_option("#filter-status", "cancelled")
+    page.locator(f"#jobs tr[data-job='{busy['id']}']").wait_for()
+    assert all(s == "cancelled" for s in page.locator("#jobs tbody tr").evaluate_all("rs => rs.map(r => r.dataset.status)"))
+    page.select_option("#filter-kind", "analyze")
+    page.locator(f"#jobs tr[data-job='{busy['id']}']").wait_for(state="detached")
+    page.select_option("#filter-kind", "")
+    page.select_option("#filter-status", "")
+    row = page.locator(f"#jobs tr[data-job='{busy['id']}']")
     row.get_by_role("button", name="Delete").click()
     row.wait_for(state="detached")
-    assert service.client().get(f"/v1/jobs/{job['id']}").status_code == 404
+    assert service.client().get(f"/v1/jobs/{busy['id']}").status_code == 404
 
 
 def test_api_docs_served_locally(page, service: Service) -> None:
