@@ -162,8 +162,12 @@ def cmd_refine(args: argparse.Namespace) -> int:
         rep = r.report
         b, a = rep["mesh_before"], rep["mesh"]
         state = "closed" if a["watertight"] else "open"
-        print(f"{out}: {a['triangles']:,} triangles (from {b['triangles']:,}), {state}; "
-              f"{len(rep['refined_faces'])} face(s) refined by {rep['method'].upper()}")
+        bf = rep.get("butterfly")
+        how = (f"{len(rep['refined_faces'])} face(s) refined by {rep['method'].upper()}" if bf is None else
+               f"re-meshed to edges ≤ {bf['max_edge']:g} mm on the Butterfly limit surface (longest "
+               f"{bf['longest_edge']:.4g} mm)" if bf.get("max_edge") else
+               f"{bf['levels']} level(s) of Butterfly, new nodes moved up to {bf['moved']['max']:.4g} mm")
+        print(f"{out}: {a['triangles']:,} triangles (from {b['triangles']:,}), {state}; {how}")
         for f in rep["refined_faces"]:
             cb, ca = f["chordal_error_before"], f["chordal_error_after"]
             err = f"chordal mean {cb['mean']:.4g} → {ca['mean']:.4g} mm" if cb and ca else "no chordal error"

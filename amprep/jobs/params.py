@@ -147,7 +147,10 @@ KINDS: dict[str, JobKind] = {k.name: k for k in (
                 Param("target", "float", None, "adaptive: chordal error every refined triangle must reach (default: a "
                       "tenth of the chosen faces' worst)", "mm", gt=0, optional=True),
                 Param("compare", "bool", True, "Add uniform re-tessellations and the other method to the report"),
-                Param("levels", "int", 1, "butterfly: levels of 1-to-4 splitting (each ×4 the triangles)", ge=1, le=6),
+                Param("levels", "int", 1, "butterfly: levels of 1-to-4 splitting (each ×4 the triangles); 0: as many "
+                      "as max_triangles allows", ge=0, le=6),
+                Param("max_edge", "float", None, "butterfly: instead of levels, split edges (longest first, new nodes "
+                      "on the limit surface) until none is longer than this", "mm", gt=0, le=1000, optional=True),
                 Param("feature_angle", "float", 30.0, "butterfly: dihedral angle over which an edge is a sharp feature "
                       "curve, kept sharp", "deg", gt=0, lt=180),
             ) + _OUTPUT + _SERVICE,

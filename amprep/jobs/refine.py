@@ -14,6 +14,7 @@ from amprep.geometry.cad.edge_curves import EdgeCurves
 from amprep.geometry.cad.read import CadModel, read_cad
 from amprep.geometry.cad.surfaces import Surface, surface_of
 from amprep.geometry.core.compiled import compiled
+from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh, face_chordal_errors, faces_section
@@ -37,6 +38,7 @@ from amprep.geometry.refine.compare import (
     select_faces,
     topology_issues,
 )
+from amprep.geometry.refine.limit_surface import LimitSurface, remesh_to_edge
 from amprep.jobs.common import input_of, is_cad, model_info, provenance, read_mesh, sha256_file
 
 
@@ -86,29 +88,57 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
         return _refine_and_report(model, mesh, surfaces, placed, info, base_tol, mesh_params, params, prog)
 
 
+def levels_within(n_triangles: int, max_triangles: int) -> int:
+    """The most levels (1..6) of 1-to-4 splitting whose output n·4^L fits max_triangles (output_too_large if none)."""
+    levels = next((L for L in range(6, 0, -1) if n_triangles * 4**L <= max_triangles), 0)
+    if not levels:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"one level of butterfly would output {n_triangles * 4:,} "
+                          f"triangles, over the limit of {max_triangles:,}")
+    return levels
+
+
+def _butterfly(mesh: Mesh, params: RefineParams, prog: Progress) -> tuple[Mesh, dict[str, Any]]:
+    """The refined mesh and the report's `butterfly` section: `levels` of splitting (0: as many as max_triangles
+    allows), or with max_edge a re-mesh to that edge length on the limit surface."""
+    bp = ButterflyParams(1, params.feature_angle)
+    if params.max_edge is not None:
+        surface = LimitSurface.of(mesh, bp, progress=prog.span(0.05, 0.3))
+        out = remesh_to_edge(surface, params.max_edge, params.max_triangles, prog.span(0.3, 0.5))
+        inc = edge_incidence(out.triangles)
+        longest = float(np.linalg.norm(out.vertices[inc.edges[:, 0]] - out.vertices[inc.edges[:, 1]], axis=1).max())
+        section = surface.refinement.to_json() | {
+            "levels": None, "max_edge": params.max_edge, "limit_depth": surface.depth, "triangles_out": out.n_triangles,
+            "longest_edge": longest, "moved": None, "per_level": []}
+        return out, section
+    levels = params.levels or levels_within(mesh.n_triangles, params.max_triangles)
+    size = mesh.n_triangles * 4**levels
+    if size > params.max_triangles:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"{levels} level(s) of butterfly would output {size:,} "
+                          f"triangles, over the limit of {params.max_triangles:,}: fewer levels")
+    result = butterfly_refine(mesh, replace(bp, levels=levels), prog.span(0.05, 0.5))
+    return result.mesh, result.to_json()
+
+
 def refine_stl(path: str | Path, info: dict[str, Any], params: RefineParams, prog: Progress) -> RefineResult:
-    """An STL refined alone by the modified Butterfly scheme (butterfly.py), with the analysis of the result and
-    what the refinement did (`butterfly` section: node classes, triangles by region, how far new nodes moved)."""
+    """An STL refined alone by the modified Butterfly scheme (butterfly.py, limit_surface.py), with the analysis of
+    the result and what the refinement did (`butterfly` section: node classes, triangles by region, how far new
+    nodes moved, or the re-mesh's edge length)."""
     prog("reading", 0.0)
     mesh = read_mesh(path)
-    size = mesh.n_triangles * 4 ** params.levels
-    if size > params.max_triangles:
-        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"{params.levels} level(s) of butterfly would output {size:,} "
-                          f"triangles, over the limit of {params.max_triangles:,}: fewer levels")
     info.update(source="stl", triangles=mesh.n_triangles)
-    result = butterfly_refine(mesh, ButterflyParams(params.levels, params.feature_angle), prog.span(0.05, 0.5))
+    refined, section = _butterfly(mesh, params, prog)
     ap = AnalysisParams(params.layer, params.build_dir, params.sample_order, bounding_box=False)
-    with compiled(worth_compiling(result.mesh.n_triangles, params.sample_order)):
-        analysis = analyze_mesh(result.mesh, ap, None, 0, info, None, prog.span(0.5, 0.95))
+    with compiled(worth_compiling(refined.n_triangles, params.sample_order)):
+        analysis = analyze_mesh(refined, ap, None, 0, info, None, prog.span(0.5, 0.95))
     mesh_before = mesh_summary(mesh)
     analysis.issues += topology_issues(mesh_before, analysis.mesh_section)
-    analysis.params = refine_params_section(params, None) | {"levels": params.levels,
+    analysis.params = refine_params_section(params, None) | {"levels": section["levels"], "max_edge": params.max_edge,
                                                              "feature_angle": params.feature_angle}
     report = analysis.report
     report.update(method="butterfly", mesh_before=mesh_before.to_json(), refined_faces=[], comparison=None,
-                  butterfly=result.to_json(), provenance=provenance(None))
+                  butterfly=section, provenance=provenance(None))
     prog("done", 1.0)
-    return RefineResult(result.mesh, result.mesh, mesh, report, analysis.chordal)
+    return RefineResult(refined, refined, mesh, report, analysis.chordal)
 
 
 def _refine_and_report(model: CadModel, mesh: Mesh, surfaces: dict[int, Surface], placed: PlacedStl | None,

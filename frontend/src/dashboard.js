@@ -180,7 +180,7 @@ async function init() {
   dropZone();
   $('#submit-form').addEventListener('submit', submit);
   for (const f of ['status', 'kind']) {
-    $(`#filter-${f}`).addEventListener('change', (e) => { state.filter[f] = e.target.value; state.jobs.clear(); load(); });
+    $(`#filter-${f}`).addEventListener('change', (e) => { state.filter[f] = e.target.value; render(); load(); });
   }
   setInterval(tick, 1000);
   await start();

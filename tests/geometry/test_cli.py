@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.io.stl import read_stl
 from tests.conftest import corpus
 
@@ -141,3 +142,24 @@ def test_refine_an_stl_alone_by_butterfly(tmp_path):
     assert "self_intersections" not in [i["code"] for i in rep["issues"]]
     bad = run("refine", str(corpus("voron_vhb_din_mount.step")), "--method", "butterfly", "-o", str(out))
     assert bad.returncode == 2 and "invalid_parameter" in bad.stderr and "STL alone" in bad.stderr
+
+
+def test_butterfly_to_an_edge_length_or_a_triangle_budget(tmp_path):
+    """`--max-edge MM` re-meshes on the limit surface until no edge is longer; `--levels 0 --max-triangles N` takes
+    as many levels as fit N."""
+    src = corpus("voron_vhb_din_mount.stl")
+    n = read_stl(src).n_triangles
+    out, report = tmp_path / "edge.stl", tmp_path / "r.json"
+    r = run("refine", str(src), "--method", "butterfly", "--max-edge", "1.5", "-o", str(out), "--report", str(report))
+    assert r.returncode == 0, r.stderr
+    mesh = read_stl(out)
+    e = edge_incidence(mesh.triangles)
+    assert np.linalg.norm(mesh.vertices[e.edges[:, 0]] - mesh.vertices[e.edges[:, 1]], axis=1).max() <= 1.5 + 1e-5
+    rep = json.loads(report.read_text())
+    assert rep["mesh"]["watertight"] and rep["butterfly"]["max_edge"] == 1.5 and rep["butterfly"]["longest_edge"] <= 1.5
+    assert "re-meshed to edges ≤ 1.5 mm" in r.stdout
+    r = run("refine", str(src), "--method", "butterfly", "--levels", "0", "--max-triangles", str(20 * n), "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert read_stl(out).n_triangles == 16 * n  # 2 levels fit 20n, 3 do not
+    r = run("refine", str(src), "--method", "butterfly", "--max-edge", "0.001", "-o", str(out))
+    assert r.returncode == 2 and "output_too_large" in r.stderr

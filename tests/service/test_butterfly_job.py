@@ -22,3 +22,15 @@ def test_an_stl_alone_is_refined_by_butterfly(service, tmp_path):
         assert r.status_code == 422 and r.json()["code"] == "invalid_parameter"
         r = submit(c, corpus("voron_hotend_mount_dragon.step"), kind="refine", params='{"method": "butterfly"}')
         assert r.status_code == 422 and "STL alone" in r.json()["detail"]
+
+
+def test_an_stl_remeshed_to_an_edge_length_over_http(service):
+    with service.client() as c:
+        job = submit(c, corpus("voron_vhb_din_mount.stl"), kind="refine",
+                     params='{"method": "butterfly", "max_edge": 2.0}', wait=240).json()
+        assert job["status"] == "succeeded", job.get("error")
+        b = job["result"]["butterfly"]
+        assert b["max_edge"] == 2.0 and b["longest_edge"] <= 2.0 and b["limit_depth"] >= 1
+        assert job["result"]["mesh"]["watertight"]
+        r = submit(c, corpus("voron_vhb_din_mount.stl"), kind="refine", params='{"method": "butterfly", "max_edge": 0}')
+        assert r.status_code == 422

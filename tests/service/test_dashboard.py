@@ -79,7 +79,11 @@ def test_upload_watch_view_colour_download(page, service: Service) -> None:
     page.set_input_files("#file", str(step))
     page.click("#submit")
     row = page.locator("#jobs tbody tr", has_text=step.name).first
+    row.wait_for()
+    page.evaluate("""() => { window.shifts = 0; new PerformanceObserver((list) => { for (const e of list.getEntries())
+        if (!e.hadRecentInput) window.shifts += e.value; }).observe({ type: 'layout-shift' }); }""")
     row.locator(".badge.succeeded").wait_for()  # no reload: the row changes by server-sent events
+    assert page.evaluate("() => window.shifts") == 0, "the list moved while the job's row updated"
     page.screenshot(path=str(SHOTS / "jobs.png"))
     job_id = row.get_attribute("data-job")
     row.locator("td.name a").click()
@@ -124,7 +128,16 @@ def test_pick_shows_face(page, service: Service) -> None:
     text = page.locator("#pick").inner_text()
     assert "CAD face" in text and any(t in text for t in ("plane", "cylinder", "cone")), text
     assert "chordal error" in text
-    assert near_colour(view_pixels(page), HIGHLIGHT) > 0, "the picked triangle is not marked"
+    shaded = view_pixels(page)
+    assert near_colour(shaded, HIGHLIGHT) > 0, "the picked triangle is not marked"
+    page.focus("#view-main canvas")
+    page.keyboard.press("w")  # the view's keys: w toggles wireframe, f fits
+    page.wait_for_function("() => document.querySelector('#wireframe').checked")
+    page.wait_for_timeout(300)
+    wire = view_pixels(page)
+    assert drawn_fraction(wire) < drawn_fraction(shaded), "wireframe drew as much as the shaded part"
+    page.keyboard.press("w")
+    page.wait_for_function("() => !document.querySelector('#wireframe').checked")
 
 
 def test_open_stl_defect_highlighted(page, service: Service, tmp_path: Path) -> None:
@@ -203,7 +216,8 @@ def test_cancel_filter_and_delete_from_list(page, service: Service) -> None:
         assert "cancelled" in row.locator(".stage").inner_text()
     page.select_option("#filter-status", "cancelled")
     page.locator(f"#jobs tr[data-job='{busy['id']}']").wait_for()
-    assert all(s == "cancelled" for s in page.locator("#jobs tbody tr").evaluate_all("rs => rs.map(r => r.dataset.status)"))
+    statuses = page.locator("#jobs tbody tr").evaluate_all("rs => rs.map(r => r.dataset.status)")
+    assert statuses and all(s == "cancelled" for s in statuses), statuses
     page.select_option("#filter-kind", "analyze")
     page.locator(f"#jobs tr[data-job='{busy['id']}']").wait_for(state="detached")
     page.select_option("#filter-kind", "")

@@ -4,6 +4,7 @@ crash in a C library) becomes an error instead of taking the caller down. Inline
 
 from __future__ import annotations
 
+import faulthandler
 import gc
 import multiprocessing as mp
 import os
@@ -61,6 +62,9 @@ class Forked(Generic[T]):
             # a collection would walk every object inherited from the parent, writing to their pages (copied on
             # write, thousands of page faults); the child is short-lived and exits without collecting
             gc.freeze()
+            # a native crash here is the parent's to report (died → its code); the traceback dump that faulthandler
+            # (pytest, a debug run) would print for the child's inherited stack is only noise
+            faulthandler.disable()
             try:
                 os.close(read)
                 try:

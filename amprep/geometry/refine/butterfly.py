@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.refine.stl_features import (
@@ -45,9 +44,9 @@ from amprep.geometry.refine.stl_features import (
     classify,
     flat_triangles,
     node_class,
+    normals_and_areas,
     sharp_turns,
     succ,
-    unit_normals,
 )
 
 #: a surface edge's new node moves at most this × the lower of its triangles' heights over the edge (_clamp)
@@ -93,12 +92,14 @@ class ButterflyResult:
                 "moved": {"max": self.moved_max, "mean": self.moved_mean}, "per_level": self.per_level}
 
 
-def _weights(k: np.ndarray, j: int) -> np.ndarray:
-    """s_j(k) of the irregular surface mask, (r,) for valences k (0 where j ≥ k)."""
+def _weight_table(k_max: int) -> np.ndarray:
+    """(k_max + 1, k_max) s_j(k) of the irregular surface mask for every valence k ≤ k_max and j (0 where j ≥ k)."""
+    k = np.arange(k_max + 1)[:, None]
     kf = np.maximum(k, 1).astype(float)
+    j = np.arange(max(k_max, 1))[None, :]
     s = (0.25 + np.cos(2 * np.pi * j / kf) + 0.5 * np.cos(4 * np.pi * j / kf)) / kf
-    s = np.where(k == 3, [5 / 12, -1 / 12, -1 / 12][j] if j < 3 else 0.0, s)
-    s = np.where(k == 4, [3 / 8, 0.0, -1 / 8, 0.0][j] if j < 4 else 0.0, s)
+    s = np.where(k == 3, np.where(j < 3, np.array([5 / 12, -1 / 12, -1 / 12, 0.0])[np.minimum(j, 3)], 0.0), s)
+    s = np.where(k == 4, np.where(j < 4, np.array([3 / 8, 0.0, -1 / 8, 0.0])[np.minimum(j, 3)], 0.0), s)
     return np.where(j < k, s, 0.0)
 
 
@@ -106,34 +107,38 @@ def _ring_masks(v: np.ndarray, tgt: np.ndarray, he: Halfedges, centre: np.ndarra
                 h0: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(irregular mask position, ring[2], ring[k−2]) of requests (r,): a centre with ring q_0 = first, then
     q_j = target of succ^(j−1)(h0) for j = 1..k−1."""
-    pos = 0.75 * v[centre] + _weights(k, 0)[:, None] * v[first]
+    table = _weight_table(int(k.max(initial=1)))
+    pos = 0.75 * v[centre] + table[k, 0][:, None] * v[first]
     ring2 = np.full(len(centre), -1, np.int64)
     ringm2 = np.full(len(centre), -1, np.int64)
     live = np.flatnonzero((k > 1) & (h0 >= 0))  # requests still walking their ring (compacted each step)
-    h = h0[live]
+    h, kl, acc = h0[live], k[live], pos[live]  # kept aligned with `live`: no scatter until a request is done
     for j in range(1, int(k.max(initial=0))):
-        keep = (j < k[live]) & (h >= 0)
-        live, h = live[keep], h[keep]
+        keep = (j < kl) & (h >= 0)
+        if not keep.all():
+            pos[live[~keep]] = acc[~keep]
+            live, h, kl, acc = live[keep], h[keep], kl[keep], acc[keep]
         if len(live) == 0:
             break
         q = tgt[h]
-        pos[live] += _weights(k[live], j)[:, None] * v[q]
+        acc += table[kl, j][:, None] * v[q]
         if j == 2:
             ring2[live] = q
-        at_m2 = k[live] - 2 == j
+        at_m2 = kl - 2 == j
         ringm2[live[at_m2]] = q[at_m2]
         h = succ(he, h)
+    pos[live] = acc
     return pos, ring2, ringm2
 
 
-def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndarray, corner: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
+def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndarray, corner: np.ndarray,
+           he: Halfedges | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
     """One level: (vertices, triangles, child feature keys, (E,) new-node displacement off the midpoint, node
     counts by class). feature_keys: sorted lo·n+hi codes of the feature edges; flat (m,): triangles of a flat
     region, whose inner edges are split at their midpoints (a flat region keeps its triangles' shapes); corner (n,):
     nodes held as vertex nodes (where a curve turns sharply)."""
     n = len(v)
-    he = Halfedges.of(t)
+    he = he or Halfedges.of(t)
     edges = he.edges
     keys = edges[:, 0] * n + edges[:, 1]
     feature = np.isin(keys, feature_keys)
@@ -158,8 +163,9 @@ def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndar
     _curve_masks(v, new, feature, edges, a, b, ca, cb)
     _surface_masks(v, tgt, he, new, surface_edge & ~inner_flat, a, b, c, d, h_ab, h_ba, cls, valence, np.where(
         feature[:, None], new - mid, np.nan))
-    _clamp(v, t, he, new, mid, surface_edge | feature, h_ab, h_ba)
-    _unfold(v, t, he.edge.reshape(-1, 3), new, mid)
+    normals, area2 = normals_and_areas(v, t)
+    _clamp(v, t, area2, new, mid, surface_edge | feature, h_ab, h_ba)
+    _unfold(v, t, normals, area2, he.edge.reshape(-1, 3), new, mid)
     moved = np.linalg.norm(new - mid, axis=1)
     # split: corner k of each triangle, and the new nodes on its sides k (k→k+1)
     mids = n + he.edge.reshape(-1, 3)
@@ -234,12 +240,13 @@ def _surface_masks(v: np.ndarray, tgt: np.ndarray, he: Halfedges, new: np.ndarra
     new[sw] = swap[sw] / nswap[sw, None]
 
 
-def _clamp(v: np.ndarray, t: np.ndarray, he: Halfedges, new: np.ndarray, mid: np.ndarray, edges_in: np.ndarray,
+def _clamp(v: np.ndarray, t: np.ndarray, area2: np.ndarray, new: np.ndarray, mid: np.ndarray, edges_in: np.ndarray,
            h_ab: np.ndarray, h_ba: np.ndarray) -> None:
     """Limit the new node of each edge in `edges_in` (E,) bool to CLAMP × the lower of its triangles' heights over
     the edge from its midpoint: next to the slivers STL files are full of (a loft's long triangles, a plane's fan), a
     mask's pull can exceed the sliver's width and fold the surface onto itself (a child triangle turns over when
-    its edge's node moves past half the height); on well-shaped triangles the limit is never reached."""
+    its edge's node moves past half the height); on well-shaped triangles the limit is never reached. area2 (m,):
+    the triangles' doubled areas."""
     e = np.flatnonzero(edges_in)
     if len(e) == 0:
         return
@@ -247,9 +254,7 @@ def _clamp(v: np.ndarray, t: np.ndarray, he: Halfedges, new: np.ndarray, mid: np
     length = np.maximum(np.linalg.norm(ab, axis=1), 1e-300)
 
     def height(h: np.ndarray) -> np.ndarray:
-        tri = t[h // 3]
-        cross = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])
-        return np.linalg.norm(cross, axis=1) / length
+        return area2[h // 3] / length
 
     other = h_ba[e]
     limit = CLAMP * np.where(other >= 0, np.minimum(height(h_ab[e]), height(np.maximum(other, 0))), height(h_ab[e]))
@@ -259,31 +264,31 @@ def _clamp(v: np.ndarray, t: np.ndarray, he: Halfedges, new: np.ndarray, mid: np
     new[e] = mid[e] + off * scale[:, None]
 
 
-def _children(points: np.ndarray, t: np.ndarray, mids: np.ndarray) -> np.ndarray:
-    """(4, m, 3, 3) corners of each triangle's four children (corner k's, then the middle one)."""
-    c = [points[t[:, k]] for k in range(3)]
-    m = [points[mids[:, k]] for k in range(3)]  # side k joins corners k and k+1
+def _children(v: np.ndarray, new: np.ndarray, t: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """(4, m, 3, 3) corners of each triangle's four children (corner k's, then the middle one): corners from v, the
+    new nodes of the sides (edge indices, side k joins corners k and k+1) from new."""
+    c = [v[t[:, k]] for k in range(3)]
+    m = [new[sides[:, k]] for k in range(3)]
     return np.stack([np.stack([c[0], m[0], m[2]], 1), np.stack([c[1], m[1], m[0]], 1),
                      np.stack([c[2], m[2], m[1]], 1), np.stack([m[0], m[1], m[2]], 1)])
 
 
-def _unfold(v: np.ndarray, t: np.ndarray, edge_of: np.ndarray, new: np.ndarray, mid: np.ndarray) -> None:
+def _unfold(v: np.ndarray, t: np.ndarray, parent: np.ndarray, area2: np.ndarray, edge_of: np.ndarray, new: np.ndarray,
+            mid: np.ndarray) -> None:
     """Where a triangle's child would turn more than ~72° from the triangle (a fold: the new nodes of its sides
     moved past its narrow width), halve those sides' displacements, up to UNFOLD_ROUNDS times, then drop them:
-    the plain split never folds. After the first round only the triangles beside a changed side are looked at."""
-    n = len(v)
-    parent = unit_normals(v, t)
+    the plain split never folds. After the first round only the triangles beside a changed side are looked at.
+    parent (m, 3), area2 (m,): the triangles' unit normals and doubled areas."""
     # only a triangle whose sides' nodes moved by a tenth of its lowest height can fold: the others are not looked at
     moved = np.linalg.norm(new - mid, axis=1)[edge_of].max(axis=1)
     c = v[t]
-    area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
     longest = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2).max(axis=1)
     active = np.flatnonzero(moved > 0.1 * area2 / np.maximum(longest, 1e-300))
     for round_ in range(UNFOLD_ROUNDS + 1):
         if len(active) == 0:
             return
         tt, eo = t[active], edge_of[active]
-        kids = _children(np.concatenate([v, new]), tt, n + eo)
+        kids = _children(v, new, tt, eo)
         cross = np.cross(kids[:, :, 1] - kids[:, :, 0], kids[:, :, 2] - kids[:, :, 0])
         norm = np.linalg.norm(cross, axis=2)
         cos = np.einsum("kmj,mj->km", cross, parent[active]) / np.maximum(norm, 1e-300)
@@ -352,12 +357,14 @@ def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
     t = np.asarray(mesh.triangles, np.int64)
     if len(t) == 0:
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the STL has no triangles")
-    feature = classify(v, t, params.feature_angle, params.flat_faces)
-    edges = edge_incidence(t).edges
+    he = Halfedges.of(t)  # the input's edge table, shared by the classification and the first level
+    normals = normals_and_areas(v, t)[0]
+    feature = classify(v, t, params.feature_angle, params.flat_faces, he, normals)
+    edges = he.edges
     n = len(v)
     keys = np.sort(edges[feature, 0] * n + edges[feature, 1])
-    planar = flat_triangles(v, t, feature)
-    on_curve = feature[edge_incidence(t).edge_of].any(axis=1)
+    planar = flat_triangles(v, t, feature, he, normals)
+    on_curve = feature[he.edge.reshape(-1, 3)].any(axis=1)
     triangles_in = {"planar": int(planar.sum()), "curved": int((~planar).sum()),
                     "on_feature_curves": int(on_curve.sum())}  # a side on a feature curve (of either kind above)
     moved_all, per_level, counts0 = [], [], {}
@@ -365,7 +372,7 @@ def butterfly_refine(mesh: Mesh, params: ButterflyParams = ButterflyParams(),
     corner = sharp_turns(v, edges[feature], params.feature_angle)
     for level in range(params.levels):
         prog("refining", level / params.levels)
-        v, t, keys, moved, counts = _level(v, t, keys, planar_now, corner)
+        v, t, keys, moved, counts = _level(v, t, keys, planar_now, corner, he if level == 0 else None)
         corner = np.concatenate([corner, np.zeros(len(v) - len(corner), bool)])
         planar_now = np.tile(planar_now, 4)  # child j of a level's triangle p is p + k·m (k = 0..3)
         counts0 = counts0 or counts

@@ -51,7 +51,8 @@ class RefineParams:
     compare_vta_iterations: int = 3  # 3 rounds of 1 → 3 give 27× the triangles: SMA's size (27 + 2k per triangle)
     compare_box: bool = True  # the bounding-box cusp height of every compared mesh (slow on big parts)
     max_triangles: int = 10_000_000  # refuse (output_too_large) a refinement predicted to exceed this
-    levels: int = 1  # butterfly: levels of 1-to-4 splitting
+    levels: int = 1  # butterfly: levels of 1-to-4 splitting (0: as many as max_triangles allows)
+    max_edge: float | None = None  # butterfly: re-mesh on the limit surface to this edge length (mm) instead
     feature_angle: float = 30.0  # butterfly: dihedral angle (deg) over which an edge is a feature curve
 
     def validate(self) -> None:
@@ -66,6 +67,10 @@ class RefineParams:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, "iterations must be in 1..50")
         if self.target is not None and not self.target > 0:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, "target must be > 0")
+        if not 0 <= self.levels <= 6:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "levels must be in 0..6")
+        if self.max_edge is not None and not self.max_edge > 0:
+            raise AmprepError(ErrorCode.INVALID_PARAMETER, "max_edge must be > 0")
         if self.max_triangles < 1:
             raise AmprepError(ErrorCode.INVALID_PARAMETER, "max_triangles must be ≥ 1")
         AnalysisParams(self.layer, self.build_dir, self.sample_order).validate()

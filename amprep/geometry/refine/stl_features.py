@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -21,10 +22,16 @@ COPLANAR = 1e-4
 HEIGHT_RATIO = 3.0
 
 
-def unit_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+def normals_and_areas(v: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((m, 3) unit normals (0 for a degenerate triangle), (m,) doubled areas |(v1 − v0) × (v2 − v0)|)."""
     n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
     norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
+    return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0), norm[:, 0]
+
+
+def unit_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(m, 3) unit normals of the triangles (0 for a degenerate one)."""
+    return normals_and_areas(v, t)[0]
 
 
 @dataclass(frozen=True)
@@ -36,6 +43,12 @@ class Halfedges:
     edge: np.ndarray
     count: np.ndarray
     edges: np.ndarray
+
+    @cached_property
+    def next_out(self) -> np.ndarray:
+        """(3m,) succ of every half-edge: the twin of the half-edge before it in its triangle (−1 at a hole)."""
+        h = np.arange(len(self.twin))
+        return self.twin[3 * (h // 3) + (h % 3 + 2) % 3]
 
     @classmethod
     def of(cls, t: np.ndarray) -> Halfedges:
@@ -52,14 +65,15 @@ class Halfedges:
 
 def succ(he: Halfedges, h: np.ndarray) -> np.ndarray:
     """The next outgoing half-edge around its start vertex (the vertex after h's target in the ring), −1 at a hole."""
-    prev_in_tri = 3 * (h // 3) + (h % 3 + 2) % 3
-    return he.twin[prev_in_tri]
+    return he.next_out[h]
 
 
-def classify(v: np.ndarray, t: np.ndarray, feature_angle: float, flat_faces: bool = True) -> np.ndarray:
-    """(E,) bool feature flag of the edges of edge_incidence(t) (the module's docstring)."""
-    he = Halfedges.of(t)
-    normals = unit_normals(v, t)
+def classify(v: np.ndarray, t: np.ndarray, feature_angle: float, flat_faces: bool = True,
+             he: Halfedges | None = None, normals: np.ndarray | None = None) -> np.ndarray:
+    """(E,) bool feature flag of the edges of edge_incidence(t) (the module's docstring); he: Halfedges.of(t),
+    normals: unit_normals(v, t)."""
+    he = he or Halfedges.of(t)
+    normals = unit_normals(v, t) if normals is None else normals
     n_e = len(he.count)
     feature = he.count != 2
     side = np.arange(3 * len(t))
@@ -138,16 +152,18 @@ def sharp_turns(v: np.ndarray, feature_edges: np.ndarray, feature_angle: float) 
     return out
 
 
-def flat_triangles(v: np.ndarray, t: np.ndarray, feature: np.ndarray) -> np.ndarray:
-    """(m,) True for triangles of a smooth region (joined across non-feature edges) whose triangles are coplanar."""
-    he = Halfedges.of(t)
+def flat_triangles(v: np.ndarray, t: np.ndarray, feature: np.ndarray, he: Halfedges | None = None,
+                   normals: np.ndarray | None = None) -> np.ndarray:
+    """(m,) True for triangles of a smooth region (joined across non-feature edges) whose triangles are coplanar;
+    he: Halfedges.of(t), normals: unit_normals(v, t)."""
+    he = he or Halfedges.of(t)
     side = np.arange(3 * len(t))
     h1 = side[(he.twin >= 0) & (side < he.twin)]
     keep = ~feature[he.edge[h1]]
     m = len(t)
     graph = coo_matrix((np.ones(int(keep.sum())), (h1[keep] // 3, he.twin[h1[keep]] // 3)), shape=(m, m))
     _, region = connected_components(graph, directed=False)
-    normals = unit_normals(v, t)
+    normals = unit_normals(v, t) if normals is None else normals
     ref = np.zeros((region.max() + 1, 3))
     ref[region] = normals  # any one normal per region
     ok = np.einsum("ij,ij->i", normals, ref[region]) > math.cos(10 * COPLANAR)
