@@ -103,12 +103,14 @@ def _butterfly(mesh: Mesh, params: RefineParams, prog: Progress) -> tuple[Mesh, 
     bp = ButterflyParams(1, params.feature_angle)
     if params.max_edge is not None:
         surface = LimitSurface.of(mesh, bp, progress=prog.span(0.05, 0.3))
-        out = remesh_to_edge(surface, params.max_edge, params.max_triangles, prog.span(0.3, 0.5))
+        remeshed = remesh_to_edge(surface, params.max_edge, params.max_triangles, prog.span(0.3, 0.5))
+        out, off = remeshed.mesh, remeshed.moved  # off: the new nodes' offsets from the input's facets
         inc = edge_incidence(out.triangles)
         longest = float(np.linalg.norm(out.vertices[inc.edges[:, 0]] - out.vertices[inc.edges[:, 1]], axis=1).max())
         section = surface.refinement.to_json() | {
             "levels": None, "max_edge": params.max_edge, "limit_depth": surface.depth, "triangles_out": out.n_triangles,
-            "longest_edge": longest, "moved": None, "per_level": []}
+            "longest_edge": longest, "per_level": [],
+            "moved": {"max": float(off.max(initial=0.0)), "mean": float(off.mean()) if len(off) else 0.0}}
         return out, section
     levels = params.levels or levels_within(mesh.n_triangles, params.max_triangles)
     size = mesh.n_triangles * 4**levels

@@ -157,6 +157,7 @@ def test_butterfly_to_an_edge_length_or_a_triangle_budget(tmp_path):
     assert np.linalg.norm(mesh.vertices[e.edges[:, 0]] - mesh.vertices[e.edges[:, 1]], axis=1).max() <= 1.5 + 1e-5
     rep = json.loads(report.read_text())
     assert rep["mesh"]["watertight"] and rep["butterfly"]["max_edge"] == 1.5 and rep["butterfly"]["longest_edge"] <= 1.5
+    assert 0 < rep["butterfly"]["moved"]["mean"] < rep["butterfly"]["moved"]["max"] < 0.5  # off the input's facets
     assert "re-meshed to edges ≤ 1.5 mm" in r.stdout
     r = run("refine", str(src), "--method", "butterfly", "--levels", "0", "--max-triangles", str(20 * n), "-o", str(out))
     assert r.returncode == 0, r.stderr

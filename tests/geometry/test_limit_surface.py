@@ -63,7 +63,9 @@ def test_remesh_to_edge(parts, tmp_path, name):  # noqa: F811
     stl = _stl(shape, tmp_path)
     max_edge = 1.0
     surface = LimitSurface.of(stl)
-    out = remesh_to_edge(surface, max_edge, 2_000_000)
+    remeshed = remesh_to_edge(surface, max_edge, 2_000_000)
+    out = remeshed.mesh
+    assert len(remeshed.moved) == len(out.vertices) - len(stl.vertices) and remeshed.moved.max() > 0
     inc = edge_incidence(out.triangles)
     lengths = np.linalg.norm(out.vertices[inc.edges[:, 0]] - out.vertices[inc.edges[:, 1]], axis=1)
     assert lengths.max() <= max_edge
@@ -94,7 +96,7 @@ def test_planes_stay_exactly_planar(parts, tmp_path):  # noqa: F811
     (float32) corners define, to 1e-9 of the part's size; the bounding box is unchanged."""
     shape = parts["plate_with_holes"]
     stl = _stl(shape, tmp_path)
-    out = remesh_to_edge(LimitSurface.of(stl), 2.0, 2_000_000)
+    out = remesh_to_edge(LimitSurface.of(stl), 2.0, 2_000_000).mesh
     assert out.n_triangles > 2 * stl.n_triangles
     diag = float(np.linalg.norm(np.ptp(stl.vertices, axis=0)))
     on_in = _plane_of_triangles(stl, _planes(shape), 1e-6 * diag)
@@ -111,3 +113,21 @@ def test_refused_before_it_runs(sphere):
     with pytest.raises(AmprepError) as e:
         remesh_to_edge(LimitSurface.of(sphere, depth=1), 0.01, 100_000)
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE
+
+
+def test_nearest_point_among_slivers():
+    """On an STL of long fans (the corpus's Voron mount), the nearest point found equals a brute-force search over
+    every triangle: candidates by triangle centroid alone missed by up to 4 mm here."""
+    from amprep.geometry.io.stl import read_stl
+    from amprep.geometry.refine.limit_surface import _closest_on_triangles, nearest_on_mesh
+    from tests.conftest import corpus
+
+    stl = read_stl(corpus("voron_vhb_din_mount.stl"))
+    rng = np.random.default_rng(11)
+    tri = rng.integers(0, stl.n_triangles, 200)
+    pts = np.einsum("qk,qkd->qd", rng.dirichlet([1, 1, 1], 200), stl.corners[tri]) + rng.normal(0, 0.05, (200, 3))
+    d, t, b = nearest_on_mesh(pts, stl)
+    for i in range(len(pts)):
+        q, _ = _closest_on_triangles(np.repeat(pts[i][None], stl.n_triangles, 0), stl.corners)
+        assert d[i] == pytest.approx(np.linalg.norm(q - pts[i], axis=1).min(), abs=1e-12)
+    np.testing.assert_allclose(np.einsum("qk,qkd->qd", b, stl.corners[t]), pts, atol=d.max() + 1e-9)

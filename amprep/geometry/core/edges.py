@@ -13,17 +13,19 @@ from amprep.geometry.core.mesh import Mesh
 @dataclass(frozen=True)
 class EdgeIncidence:
     """Undirected edges with their use: edges (e, 2) int64 sorted pairs, count (e,) triangles per edge,
-    forward (e,) how many uses run low→high index, edge_of (m, 3) edge index of each triangle side."""
+    forward (e,) how many uses run low→high index, edge_of (m, 3) edge index of each triangle side; order (3m,) the
+    sides (3·triangle + k) sorted by edge, stably."""
 
     edges: np.ndarray
     count: np.ndarray
     forward: np.ndarray
     edge_of: np.ndarray
+    order: np.ndarray | None = None
 
 
-def edge_incidence(triangles: np.ndarray) -> EdgeIncidence:
+def edge_incidence(triangles: np.ndarray, with_order: bool = False) -> EdgeIncidence:
     """Undirected edge table of (m, 3) triangles; side k of a triangle joins corners k and k+1 (edges ordered by
-    (low, high) vertex index, as np.unique would give them)."""
+    (low, high) vertex index, as np.unique would give them); `order` kept only when asked (3m int64)."""
     a = triangles.ravel().astype(np.int64)
     b = np.roll(triangles, -1, axis=1).ravel().astype(np.int64)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
@@ -33,7 +35,7 @@ def edge_incidence(triangles: np.ndarray) -> EdgeIncidence:
         packed = np.sort(key * k + np.arange(k))
         perm, ordered = packed % k, packed // k
     else:
-        perm = np.argsort(key)
+        perm = np.argsort(key, kind="stable")
         ordered = key[perm]
     start = np.ones(k, bool)
     np.not_equal(ordered[1:], ordered[:-1], out=start[1:])
@@ -43,7 +45,7 @@ def edge_incidence(triangles: np.ndarray) -> EdgeIncidence:
     count = np.diff(np.append(first, k))
     forward = np.bincount(inverse, weights=a < b, minlength=len(first)).astype(np.int64)
     edges = np.stack([lo[perm[first]], hi[perm[first]]], axis=1)
-    return EdgeIncidence(edges, count, forward, inverse.reshape(-1, 3))
+    return EdgeIncidence(edges, count, forward, inverse.reshape(-1, 3), perm if with_order else None)
 
 
 def edge_codes(tris: np.ndarray, base: int) -> np.ndarray:

@@ -106,29 +106,13 @@ def _weight_table(k_max: int) -> np.ndarray:
 def _ring_masks(v: np.ndarray, tgt: np.ndarray, he: Halfedges, centre: np.ndarray, first: np.ndarray,
                 h0: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(irregular mask position, ring[2], ring[k−2]) of requests (r,): a centre with ring q_0 = first, then
-    q_j = target of succ^(j−1)(h0) for j = 1..k−1."""
+    q_j = target of succ^(j−1)(h0) for j = 1..k−1 (_ring_kernel.ring_walk)."""
+    from amprep.geometry.refine._ring_kernel import ring_walk
+
     table = _weight_table(int(k.max(initial=1)))
-    pos = 0.75 * v[centre] + table[k, 0][:, None] * v[first]
-    ring2 = np.full(len(centre), -1, np.int64)
-    ringm2 = np.full(len(centre), -1, np.int64)
-    live = np.flatnonzero((k > 1) & (h0 >= 0))  # requests still walking their ring (compacted each step)
-    h, kl, acc = h0[live], k[live], pos[live]  # kept aligned with `live`: no scatter until a request is done
-    for j in range(1, int(k.max(initial=0))):
-        keep = (j < kl) & (h >= 0)
-        if not keep.all():
-            pos[live[~keep]] = acc[~keep]
-            live, h, kl, acc = live[keep], h[keep], kl[keep], acc[keep]
-        if len(live) == 0:
-            break
-        q = tgt[h]
-        acc += table[kl, j][:, None] * v[q]
-        if j == 2:
-            ring2[live] = q
-        at_m2 = kl - 2 == j
-        ringm2[live[at_m2]] = q[at_m2]
-        h = succ(he, h)
-    pos[live] = acc
-    return pos, ring2, ringm2
+    i64 = np.int64
+    return ring_walk(np.ascontiguousarray(v, float), tgt.astype(i64), he.next_out.astype(i64), centre.astype(i64),
+                     first.astype(i64), h0.astype(i64), k.astype(i64), table)
 
 
 def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndarray, corner: np.ndarray,
@@ -264,13 +248,13 @@ def _clamp(v: np.ndarray, t: np.ndarray, area2: np.ndarray, new: np.ndarray, mid
     new[e] = mid[e] + off * scale[:, None]
 
 
-def _children(v: np.ndarray, new: np.ndarray, t: np.ndarray, sides: np.ndarray) -> np.ndarray:
-    """(4, m, 3, 3) corners of each triangle's four children (corner k's, then the middle one): corners from v, the
-    new nodes of the sides (edge indices, side k joins corners k and k+1) from new."""
+def _child_crosses(v: np.ndarray, new: np.ndarray, t: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """(4, m, 3) (b − a) × (c − a) of each triangle's four children (corner k's, then the middle one): corners from
+    v, the new nodes of the sides (edge indices, side k joins corners k and k+1) from new."""
     c = [v[t[:, k]] for k in range(3)]
     m = [new[sides[:, k]] for k in range(3)]
-    return np.stack([np.stack([c[0], m[0], m[2]], 1), np.stack([c[1], m[1], m[0]], 1),
-                     np.stack([c[2], m[2], m[1]], 1), np.stack([m[0], m[1], m[2]], 1)])
+    kids = ((c[0], m[0], m[2]), (c[1], m[1], m[0]), (c[2], m[2], m[1]), (m[0], m[1], m[2]))
+    return np.stack([np.cross(b - a, cc - a) for a, b, cc in kids])
 
 
 def _unfold(v: np.ndarray, t: np.ndarray, parent: np.ndarray, area2: np.ndarray, edge_of: np.ndarray, new: np.ndarray,
@@ -288,8 +272,7 @@ def _unfold(v: np.ndarray, t: np.ndarray, parent: np.ndarray, area2: np.ndarray,
         if len(active) == 0:
             return
         tt, eo = t[active], edge_of[active]
-        kids = _children(v, new, tt, eo)
-        cross = np.cross(kids[:, :, 1] - kids[:, :, 0], kids[:, :, 2] - kids[:, :, 0])
+        cross = _child_crosses(v, new, tt, eo)
         norm = np.linalg.norm(cross, axis=2)
         cos = np.einsum("kmj,mj->km", cross, parent[active]) / np.maximum(norm, 1e-300)
         bad = ((cos < 0.3) & (norm > 0)).any(axis=0) & (np.linalg.norm(parent[active], axis=1) > 0)

@@ -2,8 +2,9 @@
 the input refined `depth` levels by butterfly.py (children of triangle p at level l are p + k·m_l, k = 0..3, corner
 k's child then the middle one), a point located by descending the regular 1-to-4 split of its triangle's (u, v)
 domain and evaluated on the finest level's triangle (exact at every node of levels ≤ depth, linear between them).
-The other way, a 3D point is localised on the surface by a k-d tree of the finest triangles (scipy's, in place of
-001's octree) and its nearest point there, mapped back up to (input triangle, barycentric).
+The other way, a 3D point is localised on the surface by a k-d tree of sample points spread over the finest
+triangles (scipy's, in place of 001's octree; slivers get as many samples as their length needs) and its nearest
+point there, mapped back up to (input triangle, barycentric).
 
 `remesh_to_edge` uses it: longest-edge bisection with closure (an edge is split once for both its triangles, so the
 mesh stays closed by topology) until no edge exceeds the given length, every new node evaluated on the limit surface.
@@ -77,25 +78,12 @@ class LimitSurface:
         corners = self.fine.vertices[self.fine.triangles[idx]]  # (q, 3, 3)
         return np.einsum("qk,qkd->qd", b, corners)
 
-    def locate(self, points: np.ndarray, candidates: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def locate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(tri (q,), bary (q, 3), distance (q,)): the nearest point of the limit surface to each of (q, 3) points,
-        as an input triangle and barycentric point (the k-d tree's `candidates` nearest fine triangles, by centroid,
-        searched exactly)."""
-        fine = self.fine.vertices[self.fine.triangles]
-        tree = cKDTree(fine.mean(axis=1))
-        _, cand = tree.query(points, k=min(candidates, len(fine)))
-        cand = np.atleast_2d(cand).reshape(len(points), -1)
-        best_d = np.full(len(points), np.inf)
-        best_f = np.zeros(len(points), np.int64)
-        best_b = np.zeros((len(points), 3))
-        for j in range(cand.shape[1]):
-            f = cand[:, j]
-            q, bb = _closest_on_triangles(points, fine[f])
-            d = np.linalg.norm(points - q, axis=1)
-            better = d < best_d
-            best_d[better], best_f[better], best_b[better] = d[better], f[better], bb[better]
-        tri, bary = self._lift(best_f, best_b)
-        return tri, bary, best_d
+        as an input triangle and barycentric point (nearest_on_mesh on the finest level, mapped back up)."""
+        d, f, b = nearest_on_mesh(np.asarray(points, float), self.fine)
+        tri, bary = self._lift(f, b)
+        return tri, bary, d
 
     def _lift(self, f: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fine triangles and barycentric points in them → input triangles and barycentric points in those."""
@@ -106,6 +94,64 @@ class LimitSurface:
             k, idx = idx // size, idx % size
             b = np.einsum("qk,qkd->qd", b, _CHILD[k])
         return idx, b
+
+
+def _samples(corners: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """((s, 3) points, (s,) triangle) on a grid over each of (m, 3, 3) triangles, ceil(|side|/spacing) steps along
+    its two sides from corner 0 (at least its corners and centroid): every point of a triangle lies within
+    `spacing` of one of its samples, however long and thin it is."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    na = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / spacing), 1).astype(np.int64)
+    nb = np.maximum(np.ceil(np.linalg.norm(c - a, axis=1) / spacing), 1).astype(np.int64)
+    pts, owner = [corners.mean(axis=1)], [np.arange(len(corners))]
+    for n_a, n_b in set(zip(na.tolist(), nb.tolist())):
+        tri = np.flatnonzero((na == n_a) & (nb == n_b))
+        i, j = np.meshgrid(np.arange(n_a + 1), np.arange(n_b + 1), indexing="ij")
+        keep = i / n_a + j / n_b <= 1 + 1e-12
+        u, w = (i[keep] / n_a)[None, :, None], (j[keep] / n_b)[None, :, None]
+        grid = a[tri, None] + u * (b[tri] - a[tri])[:, None] + w * (c[tri] - a[tri])[:, None]
+        pts.append(grid.reshape(-1, 3))
+        owner.append(np.repeat(tri, keep.sum()))
+    return np.concatenate(pts), np.concatenate(owner)
+
+
+def nearest_on_mesh(points: np.ndarray, mesh: Mesh, candidates: int = 16
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((q,) distance, (q,) triangle, (q, 3) barycentric): the nearest point of a mesh's triangles to each of (q, 3)
+    points. Candidates come from a k-d tree of sample points on every triangle (_samples, at the median side
+    length); where the `candidates` nearest samples might not hold the nearest triangle (the farthest of them is
+    closer than the best distance found + the spacing), every triangle with a sample within that reach is tried."""
+    corners = mesh.corners
+    sides = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)
+    spacing = max(float(np.median(sides)), 1e-9)
+    pts, owner = _samples(corners, spacing)
+    tree = cKDTree(pts)
+    k = min(candidates, len(pts))
+    reach, idx = tree.query(points, k=k)
+    reach, idx = np.asarray(reach).reshape(len(points), k), np.asarray(idx).reshape(len(points), k)
+    best_d = np.full(len(points), np.inf)
+    best_t = np.zeros(len(points), np.int64)
+    best_b = np.zeros((len(points), 3))
+
+    def consider(rows: np.ndarray, tris: np.ndarray) -> None:
+        q, bary = _closest_on_triangles(points[rows], corners[tris])
+        d = np.linalg.norm(points[rows] - q, axis=1)
+        order = np.lexsort((tris, d))[::-1]  # ties: the lowest triangle wins (written last)
+        rows, d, tris, bary = rows[order], d[order], tris[order], bary[order]
+        better = d < best_d[rows]
+        ties = (d == best_d[rows]) & (tris < best_t[rows])
+        take = better | ties
+        best_d[rows[take]], best_t[rows[take]], best_b[rows[take]] = d[take], tris[take], bary[take]
+
+    for j in range(k):
+        consider(np.arange(len(points)), owner[idx[:, j]])
+    unsure = np.flatnonzero(reach[:, -1] < best_d + spacing)
+    if len(unsure) and k < len(pts):
+        lists = tree.query_ball_point(points[unsure], best_d[unsure] + spacing)
+        rows = np.repeat(unsure, [len(x) for x in lists])
+        if len(rows):
+            consider(rows, owner[np.concatenate([np.asarray(x, np.int64) for x in lists])])
+    return best_d, best_t, best_b
 
 
 def _closest_on_triangles(p: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -143,8 +189,17 @@ def _closest_on_triangles(p: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, n
     return np.einsum("qk,qkd->qd", bary, tri), bary
 
 
+@dataclass(frozen=True)
+class Remeshed:
+    """The re-meshed surface and, per new node (in order, after the input's nodes), how far it lies from the point
+    of its input triangle with the same barycentric coordinates (mm): the limit surface's offset from the facets."""
+
+    mesh: Mesh
+    moved: np.ndarray
+
+
 def remesh_to_edge(surface: LimitSurface, max_edge: float, max_triangles: int,
-                   progress: ProgressFn | None = None) -> Mesh:
+                   progress: ProgressFn | None = None) -> Remeshed:
     """The coarse mesh bisected (longest edge first, with closure) until no edge is longer than max_edge (mm), new
     nodes on the limit surface; output_too_large when that would exceed max_triangles."""
     if not max_edge > 0:
@@ -159,11 +214,12 @@ def remesh_to_edge(surface: LimitSurface, max_edge: float, max_triangles: int,
     if estimate > max_triangles:
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"splitting every edge down to {max_edge:g} mm needs about "
                           f"{estimate:,.0f} triangles, over the limit of {max_triangles:,}")
+    moved: list[np.ndarray] = []
     for rnd in range(MAX_ROUNDS):
         prog("re-meshing on the limit surface", min(rnd / 12, 0.95))
-        v, t, root, bary, split = _bisect_round(surface, v, t, root, bary, max_edge)
+        v, t, root, bary, split = _bisect_round(surface, v, t, root, bary, max_edge, moved)
         if not split:
-            return Mesh.from_arrays(v, t)
+            return Remeshed(Mesh.from_arrays(v, t), np.concatenate(moved) if moved else np.zeros(0))
         if len(t) > max_triangles:
             raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"re-meshing to {max_edge:g} mm went over "
                               f"{max_triangles:,} triangles")
@@ -171,9 +227,9 @@ def remesh_to_edge(surface: LimitSurface, max_edge: float, max_triangles: int,
 
 
 def _bisect_round(surface: LimitSurface, v: np.ndarray, t: np.ndarray, root: np.ndarray, bary: np.ndarray,
-                  max_edge: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+                  max_edge: float, moved: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """One round: mark edges over max_edge, close the marks (a triangle with a marked side has its longest marked),
-    split; returns the new arrays and how many edges were split."""
+    split; returns the new arrays and how many edges were split, and appends the new nodes' offsets to `moved`."""
     inc = edge_incidence(t)
     e = inc.edges
     length = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
@@ -197,6 +253,8 @@ def _bisect_round(surface: LimitSurface, v: np.ndarray, t: np.ndarray, root: np.
     ti, k = h // 3, h % 3
     mid_bary = 0.5 * (bary[ti, k] + bary[ti, (k + 1) % 3])
     new_pts = surface.evaluate(root[ti], mid_bary)
+    coarse = surface.coarse.vertices[surface.coarse.triangles[root[ti]]]  # (s, 3, 3)
+    moved.append(np.linalg.norm(new_pts - np.einsum("sk,skd->sd", mid_bary, coarse), axis=1))
     node = np.full(len(e), -1, np.int64)
     node[split] = len(v) + np.arange(len(split))
     v = np.concatenate([v, new_pts])

@@ -52,9 +52,9 @@ class Halfedges:
 
     @classmethod
     def of(cls, t: np.ndarray) -> Halfedges:
-        inc = edge_incidence(t)
+        inc = edge_incidence(t, with_order=True)
         edge = inc.edge_of.reshape(-1)
-        order = np.argsort(edge, kind="stable")
+        order = inc.order  # the sides sorted by edge, stably: twins are neighbours
         twin = np.full(len(edge), -1, np.int64)
         pair = inc.count[edge[order]] == 2
         first = order[pair][0::2]
