@@ -74,6 +74,8 @@ def run_refine(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Pat
                                                    "chordal_error_before", "chordal_error_after")}
                                  for f in rep["refined_faces"]],
                "issues": rep["issues"], "provenance": rep["provenance"]}
+    if rep.get("butterfly") is not None:  # node classes, triangles by region, moves: a few numbers per level
+        summary["butterfly"] = rep["butterfly"]
     return summary, paths
 
 
