@@ -24,7 +24,7 @@ from .routes import health, jobs, kinds, pages
 
 log = logging.getLogger("amprep.api")
 
-DESCRIPTION = """CAD (STEP, IGES, BREP) or STL in; closed STL or 3MF within a chord tolerance, and error reports, out.
+DESCRIPTION = """CAD (STEP, IGES, BREP, ACIS SAT/SAB/DXF) or STL in; closed STL or 3MF within a chord tolerance, and error reports, out.
 
 Submit with `POST /v1/jobs` (multipart), follow with `GET /v1/jobs/{id}` or its server-sent `events`, download
 `artifacts`. Errors are RFC 9457 problem details with a stable `code`. One line converts a file:

@@ -16,7 +16,7 @@ from amprep.geometry.core.formats import sniff_bytes
 
 from .problems import ApiError
 
-EXTENSION = {"step": ".step", "iges": ".iges", "brep": ".brep", "stl": ".stl"}
+EXTENSION = {"step": ".step", "iges": ".iges", "brep": ".brep", "sat": ".sat", "sab": ".sab", "dxf": ".dxf", "stl": ".stl"}
 
 
 def _safe_name(name: str | None) -> str:
@@ -66,4 +66,4 @@ def require_stl(info: dict[str, Any]) -> None:
 def require_cad(info: dict[str, Any]) -> None:
     """With an 'stl' part, 'file' is the CAD it is scored against."""
     if info["format"] == "stl":
-        raise ApiError(422, ErrorCode.INVALID_REQUEST, "file: with an 'stl' part, 'file' must be the CAD (STEP, IGES, BREP)")
+        raise ApiError(422, ErrorCode.INVALID_REQUEST, "file: with an 'stl' part, 'file' must be the CAD (STEP, IGES, BREP, ACIS SAT/SAB/DXF)")

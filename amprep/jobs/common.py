@@ -58,8 +58,10 @@ def is_cad(fmt: str) -> bool:
 
 
 def model_info(model: CadModel) -> dict[str, Any]:
-    """The `input` keys a CAD model adds: its declared unit, solids and faces."""
-    return {"units": model.units, "solids": model.solids, "faces": len(model.faces)}
+    """The `input` keys a CAD model adds: its declared unit, solids and faces, and the faces the reader left out
+    (`unsupported_geometry`: ACIS faces on surfaces with no exact or stored form; empty for other formats)."""
+    return {"units": model.units, "solids": model.solids, "faces": len(model.faces),
+            "unsupported_geometry": [dict(f) for f in model.unsupported]}
 
 
 #: the `input` keys of an STL, which declares no unit, solids or faces

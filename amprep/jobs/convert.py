@@ -81,6 +81,7 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
             notes.append("the file declares no length unit: read as millimetres")
         if model.sewn:
             notes.append("loose faces were sewn into shells")
+        notes.extend(model.notes)
         mesh = meshing.mesh
         if meshing.unmeshed_faces:
             notes.append(f"{len(meshing.unmeshed_faces)} face(s) could not be meshed")

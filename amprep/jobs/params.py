@@ -118,7 +118,7 @@ _RATIO = r"\d+(\.\d+)?:\d+(\.\d+)?:\d+(\.\d+)?"
 KINDS: dict[str, JobKind] = {k.name: k for k in (
     JobKind("convert", "CAD or STL in, closed STL or 3MF out within a chord tolerance",
             _meshing(0.1, "Max chord deviation from the exact surface") + _OUTPUT + _SERVICE,
-            ("part.stl", "part.3mf"), "quick", False, "STEP, IGES, BREP or STL (recognised from its bytes)"),
+            ("part.stl", "part.3mf"), "quick", False, "STEP, IGES, BREP, ACIS (SAT, SAB, DXF) or STL (recognised from its bytes)"),
     JobKind("analyze", "The error report: mesh checks, defects, chordal error, cusp height, cylindricity, regularity",
             _meshing(0.1, "Tessellation tolerance for CAD input") + _PRINT + (
                 Param("sample_order", "int", 6, "Chordal sampling order inside each triangle (6: 28 points)", ge=1, le=30),
@@ -126,7 +126,7 @@ KINDS: dict[str, JobKind] = {k.name: k for k in (
                       "(4/layer)², at most 2 M points)", "1/mm²", gt=0, le=10000, optional=True),
                 Param("bounding_box", "bool", True, "Also run the thesis's bounding-box cusp-height method"),
             ) + _SERVICE,
-            ("report.json",), "quick", True, "STEP, IGES or BREP (tessellated as convert does), or an STL"),
+            ("report.json",), "quick", True, "STEP, IGES, BREP or ACIS (SAT, SAB, DXF) (tessellated as convert does), or an STL"),
     JobKind("refine", "Densify the curved faces whose error is too high (SMA, VTA or adaptive), keeping the mesh closed; "
             "or refine an STL alone (butterfly)",
             _meshing(0.2, "Tolerance of the first tessellation when no STL is given") + _PRINT + (
@@ -154,7 +154,7 @@ KINDS: dict[str, JobKind] = {k.name: k for k in (
                 Param("feature_angle", "float", 30.0, "butterfly: dihedral angle over which an edge is a sharp feature "
                       "curve, kept sharp", "deg", gt=0, lt=180),
             ) + _OUTPUT + _SERVICE,
-            ("refined.stl", "refined.3mf"), "heavy", True, "STEP, IGES or BREP (with the STL to refine as `stl`), or "
+            ("refined.stl", "refined.3mf"), "heavy", True, "STEP, IGES, BREP or ACIS (SAT, SAB, DXF) (with the STL to refine as `stl`), or "
             "an STL alone with method butterfly"),
 )}
 

@@ -69,7 +69,7 @@ def refine_file(path: str | Path, stl: str | Path | None = None, mesh_params: Me
         return refine_stl(path, info, params, prog)
     if not is_cad(fmt):
         raise AmprepError(ErrorCode.INVALID_PARAMETER, f"{params.method.upper()} refines faces of a CAD model: give "
-                          "the STEP, IGES or BREP (and the STL with --stl), or use method butterfly for an STL alone")
+                          "the STEP, IGES, BREP or ACIS (SAT, SAB, DXF) (and the STL with --stl), or use method butterfly for an STL alone")
     placed: PlacedStl | None = None
     if stl is not None:
         prog("reading", 0.0)

@@ -123,7 +123,7 @@ async def _callback_allowed(url: str, allow: list[str]) -> None:
                **PROBLEMS})
 async def create_job(
     request: Request, store: StoreDep, celery: CeleryDep, owner: OwnerDep,
-    file: Annotated[UploadFile, File(description="STEP, IGES, BREP or STL (recognised from its bytes)")],
+    file: Annotated[UploadFile, File(description="STEP, IGES, BREP, ACIS (SAT, SAB, DXF) or STL (recognised from its bytes)")],
     kind: Annotated[Kind, Form(description="convert | analyze | refine")],
     params: Annotated[str, Form(description="JSON object of the kind's params (unknown keys are an error): "
                                 "ConvertParams, AnalyzeParams or RefineParams",

@@ -12,7 +12,7 @@ export class ApiError extends Error {
 
 /** Plain words for the stable error codes (the code is always shown beside them). */
 export const PLAIN = {
-  unsupported_format: 'The file is not STEP, IGES, BREP or STL.',
+  unsupported_format: 'The file is not STEP, IGES, BREP, ACIS (SAT, SAB, DXF) or STL.',
   unreadable_cad: 'The CAD file could not be read.',
   unreadable_mesh: 'The STL file could not be read.',
   empty_model: 'The file holds no solid or surface to mesh.',

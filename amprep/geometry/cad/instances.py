@@ -73,7 +73,7 @@ def find_instancing(model: CadModel) -> Instancing | None:
     counts = np.array([_counts(p) for p in parts], np.int64)
     if 2 * counts[:, 0].sum() > len(model.faces):
         return None
-    template = model_from_shape(compound(parts), model.format, model.units, model.sewn)
+    template = model_from_shape(compound(parts), model.format, model.units, model.sewn, model.notes, model.unsupported)
     per_solid = counts[part_of]
     start = np.vstack([np.zeros((1, 3), np.int64), np.cumsum(per_solid, axis=0)[:-1]])
     full = _counts(model.shape)

@@ -29,7 +29,7 @@ from amprep.errors import AmprepError, ErrorCode, is_occt_failure
 from amprep.geometry.cad.locations import bake_scaled_locations
 from amprep.geometry.cad.topology import compound, explore
 from amprep.geometry.cad.wire_crossings import crossing_faces
-from amprep.geometry.core.formats import sniff_path
+from amprep.geometry.core.formats import ACIS_FORMATS, sniff_path
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +43,8 @@ class CadModel:
     face_solid: tuple[int, ...]
     solids: int
     sewn: bool = False
+    notes: tuple[str, ...] = ()  # what the reader left out or changed, for the report (ACIS sheets, skipped faces)
+    unsupported: tuple[dict, ...] = ()  # faces with no exact or stored geometry: {"face", "surface", "why"}
 
 
 _UNIT_NAMES = {
@@ -187,7 +189,8 @@ def sew_loose_faces(shape: TopoDS_Shape, tolerance: float = SEW_TOLERANCE) -> tu
     return (compound([*solids, sewn]) if solids else sewn), True
 
 
-def model_from_shape(shape: TopoDS_Shape, fmt: str = "brep", units: str = "none", sewn: bool = False) -> CadModel:
+def model_from_shape(shape: TopoDS_Shape, fmt: str = "brep", units: str = "none", sewn: bool = False,
+                     notes: tuple[str, ...] = (), unsupported: tuple[dict, ...] = ()) -> CadModel:
     """Index the faces and solids of a shape (faces in TopExp order; an assembly's instances are distinct), after
 folding any scaling location into the geometry (locations.py)."""
     if shape is None or shape.IsNull():
@@ -204,7 +207,7 @@ folding any scaling location into the geometry (locations.py)."""
             if i > 0 and face_solid[i - 1] < 0:
                 face_solid[i - 1] = s - 1
     faces = tuple(TopoDS.Face_s(faces_map.FindKey(i)) for i in range(1, faces_map.Extent() + 1))
-    return CadModel(shape, fmt, units, faces, tuple(face_solid), solids_map.Extent(), sewn)
+    return CadModel(shape, fmt, units, faces, tuple(face_solid), solids_map.Extent(), sewn, notes, unsupported)
 
 
 def _iter_map(m: TopTools_IndexedMapOfShape):  # type: ignore[no-untyped-def]
@@ -232,8 +235,15 @@ def read_shape(path: str | Path, fmt: str) -> tuple[TopoDS_Shape, str]:
 
 
 def read_cad(path: str | Path, fmt: str | None = None) -> CadModel:
-    """Read a STEP, IGES or BREP file into a CadModel in mm; faces outside solids are sewn (sew_loose_faces)."""
+    """Read a STEP, IGES, BREP or ACIS (SAT, SAB, DXF) file into a CadModel in mm; faces outside solids are sewn
+    (sew_loose_faces) except ACIS's, whose faces share their edges already."""
     fmt = fmt or sniff_path(Path(path))
+    if fmt in ACIS_FORMATS:
+        from amprep.geometry.cad.acis import read_acis_file
+
+        with occt_messages_muted():
+            acis = read_acis_file(path, fmt)
+        return model_from_shape(acis.shape, fmt, acis.units, False, tuple(acis.notes()), tuple(acis.skipped))
     shape, units = read_shape(path, fmt)
     shape, sewn = sew_loose_faces(shape)
     return model_from_shape(shape, fmt, units, sewn)

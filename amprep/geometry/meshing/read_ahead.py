@@ -46,25 +46,26 @@ def read_and_prepare(path: str | Path, fmt: str, params: MeshParams) -> Prepared
     return _received(_child(str(path), fmt, params), fmt)
 
 
-_Sent = tuple[bytes, str, bool, float, tuple[int, ...], int, bool]
+_Sent = tuple[bytes, str, bool, float, tuple[int, ...], int, bool, tuple[str, ...], tuple[dict, ...]]
 
 
 def _child(path: str, fmt: str, params: MeshParams) -> _Sent:
     p = prepare(read_cad(path, fmt), params)
     buf = io.BytesIO()
     BinTools.Write_s(p.model.shape, buf, True, False, BinTools_FormatVersion.BinTools_FormatVersion_VERSION_3)
-    return buf.getvalue(), p.model.units, p.model.sewn, p.tolerance, p.own, p.estimated, p.instancing is not None
+    return (buf.getvalue(), p.model.units, p.model.sewn, p.tolerance, p.own, p.estimated, p.instancing is not None,
+            p.model.notes, p.model.unsupported)
 
 
 def _received(sent: _Sent, fmt: str) -> Prepared:
     """The Prepared the child made, from its BREP: the instancing is found again on the received shape (the same
     solids; instances share their faces' triangulations, so every placement arrives meshed)."""
-    data, units, sewn, tol, own, estimated, instanced = sent
+    data, units, sewn, tol, own, estimated, instanced, notes, unsupported = sent
     shape = TopoDS_Shape()
     BinTools.Read_s(shape, io.BytesIO(data))
     if shape.IsNull():
         raise AmprepError(ErrorCode.MESHING_FAILED, "the meshed shape did not come back from the reading process")
-    model = model_from_shape(shape, fmt, units, sewn)
+    model = model_from_shape(shape, fmt, units, sewn, notes, unsupported)
     inst = find_instancing(model) if instanced else None
     return Prepared(model, tol, own if inst is not None or not instanced else (), estimated, inst)
 
