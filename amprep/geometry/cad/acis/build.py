@@ -41,7 +41,7 @@ from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal, TColStd_A
 from OCP.TopoDS import TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shell, TopoDS_Solid, TopoDS_Vertex, TopoDS_Wire
 
 from amprep.geometry.cad.acis.entities import Cursor, Model
-from amprep.geometry.cad.acis.records import Flag, Ref, fail
+from amprep.geometry.cad.acis.records import Flag, fail
 from amprep.geometry.cad.acis.splines import BSplineData, find_block, read_block
 
 TOL = 1e-7  # mm-free: ACIS's resabs is 1e-6 in the file's units; OCCT's healing widens where needed
@@ -122,22 +122,27 @@ class Builder:
         self._curve: dict[int, Geom_Curve] = {}
         self._surface: dict[int, tuple[Geom_Surface, bool]] = {}
         self._subtypes: list[tuple[int, int]] | None = None
+        self._owned: set[int] = set()  # lumps, shells and faces already placed: each belongs to one owner
 
     # ------------------------------------------------------------ chains
 
-    def chain(self, first: int, step, what: str) -> Iterator[int]:  # type: ignore[no-untyped-def]
-        """first, step(first), … until -1 (or back to first, for a coedge ring); a chain longer than the file, or
-        one that closes on another member, is a reference cycle: unreadable_cad."""
+    def chain(self, first: int, step, what: str, ring: bool = False) -> Iterator[int]:  # type: ignore[no-untyped-def]
+        """first, step(first), … until -1 (or back to first, for a `ring` of coedges); a chain that comes back on
+        itself otherwise is a reference cycle: unreadable_cad."""
         seen: set[int] = set()
         i = first
         while i != -1:
             if i in seen:
-                if i == first:
+                if ring and i == first:
                     return
                 raise fail(f"the {what} chain from ${first} loops back on ${i}")
             if len(seen) > self.limit:
                 raise fail(f"the {what} chain from ${first} is longer than the file")
             seen.add(i)
+            if not ring:
+                if i in self._owned:
+                    raise fail(f"${i} ({what}) is claimed by two owners")
+                self._owned.add(i)
             yield i
             i = step(i)
 
@@ -251,8 +256,7 @@ class Builder:
         if isinstance(nxt, Flag) or nxt in ("I", "F"):  # the profile's interval (400 and later)
             c.bound(), c.bound()
         sine, cosine = c.num(), c.num()
-        nxt = c.peek()
-        if isinstance(nxt, (int, float)) and not isinstance(nxt, (Flag, Ref)):
+        if c.number_next():
             c.num()  # u parameter scale (400 and later; some writers leave it out)
         rev = c.flag("reversed", "forward")
         r = _norm(major)
@@ -319,7 +323,10 @@ class Builder:
         w = TopoDS_Wire()
         bb.MakeWire(w)
         first = self.m.loop(loop).coedge
-        for ce in self.chain(first, lambda k: self.m.coedge(k).next, "coedge"):
+        for ce in self.chain(first, lambda k: self.m.coedge(k).next, "coedge", ring=True):
+            if ce in self._owned:
+                raise fail(f"coedge ${ce} is in two loops")
+            self._owned.add(ce)
             co = self.m.coedge(ce)
             got = self.edge(co.edge)
             if got is None:
@@ -335,7 +342,7 @@ class Builder:
         bb = BRep_Builder()
         face = TopoDS_Face()
         bb.MakeFace(face, surface, TOL)
-        for lp in self.chain(f.loop, lambda k: self.m.loop(k).next, "loop"):
+        for lp in self.chain(f.loop, lambda k: self.m.loop(k).next, "loop"):  # a loop's coedges: wire()
             w = self.wire(lp)
             bb.Add(face, w.Reversed() if flip else w)
         return face.Reversed() if flip else face  # type: ignore[return-value]

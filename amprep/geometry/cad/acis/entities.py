@@ -10,7 +10,28 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amprep.geometry.cad.acis.records import CLOSE, OPEN, Brace, Flag, Records, Ref, Text, Token, fail
+from amprep.geometry.cad.acis.records import CLOSE, OPEN, Flag, Records, Ref, Text, Token, fail
+
+
+def number(tok: Token) -> float | None:
+    """The value of a number token (SAT text or SAB's int and double), None for anything else."""
+    t = type(tok)
+    if t is float or t is int:
+        return float(tok)
+    if t is str and tok[:1] not in ("$", "@") and tok not in ("I", "F", "T", "{", "}"):
+        try:
+            return float(tok)  # type: ignore[arg-type]
+        except ValueError:
+            return None
+    return None
+
+
+def is_int(tok: Token) -> bool:
+    """True for a plain integer token (SAT digits, SAB's int), not a reference, logical or enumeration."""
+    t = type(tok)
+    if t is int:
+        return True
+    return t is str and (tok.isdigit() or (tok[:1] == "-" and tok[1:].isdigit()))  # type: ignore[union-attr]
 
 
 class Cursor:
@@ -31,52 +52,47 @@ class Cursor:
 
     def ref(self) -> int:
         tok = self._next()
-        if not isinstance(tok, Ref):
-            raise fail(f"{self.where}: expected an entity reference, found {str(tok)[:20]!r}")
-        return int(tok)
+        if isinstance(tok, Ref):
+            return int(tok)
+        if type(tok) is str and tok[:1] == "$":
+            try:
+                return int(tok[1:])
+            except ValueError:
+                pass
+        raise fail(f"{self.where}: expected an entity reference, found {str(tok)[:20]!r}")
 
     def ref_after_ints(self) -> int:
         """The next reference, past any plain integers some writers put before it."""
-        while isinstance(self.peek(), int) and not isinstance(self.peek(), (Ref, Flag)):
+        while self.i < len(self.t) and is_int(self.t[self.i]):
             self.i += 1
         return self.ref()
 
     def num(self) -> float:
         tok = self._next()
-        if isinstance(tok, (Ref, Flag, str)) or not isinstance(tok, (int, float)):
+        v = number(tok)
+        if v is None:
             raise fail(f"{self.where}: expected a number, found {str(tok)[:20]!r}")
-        v = float(tok)
         if v != v or v in (float("inf"), float("-inf")):
             raise fail(f"{self.where}: a non-finite number")
         return v
 
-    def integer(self) -> int:
-        v = self.num()
-        if v != int(v):
-            raise fail(f"{self.where}: expected an integer, found {v}")
-        return int(v)
+    def number_next(self) -> bool:
+        """True when the next token is a number."""
+        return self.i < len(self.t) and number(self.t[self.i]) is not None
 
     def vec(self) -> tuple[float, float, float]:
         return self.num(), self.num(), self.num()
 
     def flag(self, true_word: str, false_word: str) -> bool:
-        """True for `true_word` (or SAB's logical 1), False for `false_word` (0)."""
+        """True for `true_word` (or SAB's logical 1), False for `false_word` (0); pre-400 writers' 1 and 0 too."""
         tok = self._next()
         if isinstance(tok, Flag):
             return bool(tok)
-        if tok == true_word:
+        if tok == true_word or tok == "1" or (type(tok) is int and tok == 1):
             return True
-        if tok == false_word:
+        if tok == false_word or tok == "0" or (type(tok) is int and tok == 0):
             return False
-        if isinstance(tok, int) and not isinstance(tok, Ref) and tok in (0, 1):  # pre-400 writers: 0/1
-            return bool(tok)
         raise fail(f"{self.where}: expected {false_word} or {true_word}, found {str(tok)[:20]!r}")
-
-    def word(self) -> str:
-        tok = self._next()
-        if isinstance(tok, (Ref, Brace)) or not isinstance(tok, str):
-            raise fail(f"{self.where}: expected a word, found {str(tok)[:20]!r}")
-        return str(tok)
 
     def bound(self) -> float | None:
         """One end of an interval: `I` (infinite) → None, `F x` → x."""
@@ -87,14 +103,15 @@ class Cursor:
 
     def subtype(self) -> list[Token]:
         """The tokens of a `{ … }` subtype (braces nested inside kept), the cursor past its `}`."""
-        if self._next() is not OPEN and self.t[self.i - 1] != "{":
+        tok = self._next()
+        if tok != "{" or isinstance(tok, Text):
             raise fail(f"{self.where}: expected a subtype '{{'")
         start, depth = self.i, 1
         while depth:
             tok = self._next()
-            if tok == "{" and isinstance(tok, str) and not isinstance(tok, Text):
+            if tok == "{" and not isinstance(tok, Text):
                 depth += 1
-            elif tok == "}" and isinstance(tok, str) and not isinstance(tok, Text):
+            elif tok == "}" and not isinstance(tok, Text):
                 depth -= 1
         return self.t[start:self.i - 1]
 

@@ -1,8 +1,9 @@
 """ACIS records from SAT text or SAB bytes: the header, and each record's name and tokens, decoded on demand.
 
-Both encodings become one token stream: `Ref` (an entity reference, -1 for none), int, float, str (a word such as
-`forward` or `nubs`), `Text` (a counted string), `Flag` (SAB's logical, whose word depends on the field), and the
-`OPEN` / `CLOSE` braces of a subtype. Vectors (SAB's position and direction tags) become three floats. Records are
+Both encodings become one token stream, read field by field by entities.Cursor: SAT's tokens stay the words written
+(`$12`, `4.5`, `forward`, `{`), SAB's are typed: `Ref` (an entity reference, -1 for none), int, float, `Enum`, str
+(an identifier such as `nubs`), `Flag` (a logical, whose word depends on the field) and the `OPEN` / `CLOSE` braces;
+a counted string is `Text` in both. Vectors (SAB's position and direction tags) become three floats. Records are
 split at once (one regular-expression search per record) and tokenised only when read, so a file's attributes,
 most of its records, cost nothing. Every malformed byte is `unreadable_cad`.
 """
@@ -92,7 +93,7 @@ class Records:
 
 _BOUNDARY = re.compile(r"@(\d+) |#")
 _WORD = re.compile(r"\{|\}|[^\s{}]+")
-_NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+_COUNTED = re.compile(r"\s*@(\d+) ")
 
 
 def _counted_strings(line: str) -> list[str]:
@@ -108,35 +109,16 @@ def _counted_strings(line: str) -> list[str]:
     return out
 
 
-def _sat_token(word: str) -> Token:
-    c = word[0]
-    if c == "$":
-        try:
-            return Ref(int(word[1:]))
-        except ValueError:
-            raise fail(f"bad reference {word[:20]!r}") from None
-    if c == "{":
-        return OPEN
-    if c == "}":
-        return CLOSE
-    if c.isdigit() or c in "-+.":
-        if _NUMBER.match(word):
-            if "." in word or "e" in word or "E" in word:
-                return float(word)
-            return int(word)
-        if word.lower().lstrip("+-") in ("1.#inf", "inf", "1.#ind", "nan"):
-            raise fail(f"a non-finite number {word!r}")
-    return word
-
-
 def _sat_decode(raw: object) -> list[Token]:
+    """A SAT record's tokens as written (`$n`, numbers and words stay text: entities.Cursor reads them by field);
+    `@n` strings become Text, braces their own tokens."""
     text = str(raw)
     if "@" not in text:
-        return [_sat_token(w) for w in _WORD.findall(text)]
+        return text.split() if "{" not in text and "}" not in text else _WORD.findall(text)  # type: ignore[return-value]
     out: list[Token] = []
     i = 0
     while i < len(text):
-        m = re.compile(r"\s*@(\d+) ").match(text, i)
+        m = _COUNTED.match(text, i)
         if m:
             n = int(m.group(1))
             out.append(Text(text[m.end():m.end() + n]))
@@ -145,11 +127,7 @@ def _sat_decode(raw: object) -> list[Token]:
         m = _WORD.search(text, i)
         if not m:
             break
-        w = m.group(0)
-        if w.startswith("@"):  # "@n" with no space before the string: take the rest of the record word by word
-            out.append(Text(w))
-        else:
-            out.append(_sat_token(w))
+        out.append(m.group(0))
         i = m.end()
     return out
 

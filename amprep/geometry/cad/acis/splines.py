@@ -34,18 +34,21 @@ class BSplineData:
 
 
 def _is_word(tok: Token) -> bool:
-    return isinstance(tok, (str, Enum)) and not isinstance(tok, (Brace, Text))
+    """A closure or singularity word (SAT) or enumeration (SAB)."""
+    if isinstance(tok, Enum):
+        return True
+    return type(tok) is str and tok[:1].isalpha() and tok not in ("I", "F", "T")
 
 
 def _is_int(tok: Token) -> bool:
-    return isinstance(tok, int) and not isinstance(tok, (Ref, Flag, Enum))
+    return type(tok) is int or (type(tok) is str and tok.isdigit())
 
 
 def find_block(tokens: list[Token], surface: bool) -> int | None:
     """Index of the first `nubs`/`nurbs` that starts a surface block (two degrees) or a curve block (one), or None
     when the subtype stores none (`nullbs`, `summary`, or a type with no approximation)."""
     for k, tok in enumerate(tokens):
-        if tok not in ("nubs", "nurbs") or isinstance(tok, Text):
+        if tok not in ("nubs", "nurbs") or isinstance(tok, Text):  # noqa: PLR1714
             continue
         if surface and k + 3 < len(tokens) and _is_int(tokens[k + 1]) and _is_int(tokens[k + 2]) and _is_word(tokens[k + 3]):
             return k
@@ -56,9 +59,12 @@ def find_block(tokens: list[Token], surface: bool) -> int | None:
 
 def _floats(tokens: list[Token], start: int, n: int, where: str) -> np.ndarray:
     chunk = tokens[start:start + n]
-    if len(chunk) < n or any(isinstance(t, (str, Ref, Flag, Enum)) for t in chunk):
+    if len(chunk) < n or any(isinstance(t, (Ref, Flag, Enum, Brace, Text)) for t in chunk):
         raise fail(f"{where}: the B-spline data is shorter than its counts say")
-    out = np.asarray(chunk, dtype=float)
+    try:
+        out = np.asarray(chunk, dtype=float)
+    except ValueError:
+        raise fail(f"{where}: the B-spline data is shorter than its counts say") from None
     if not np.isfinite(out).all():
         raise fail(f"{where}: a non-finite B-spline value")
     return out
@@ -81,7 +87,7 @@ def read_block(tokens: list[Token], k: int, surface: bool, where: str) -> BSplin
     rational = tokens[k] == "nurbs"
     pos = k + 1
     n_dir = 2 if surface else 1
-    degrees = tuple(int(tokens[pos + d]) for d in range(n_dir))  # type: ignore[call-overload]
+    degrees = tuple(int(tokens[pos + d]) for d in range(n_dir))  # type: ignore[call-overload]  # find_block: ints
     pos += n_dir
     if any(not 1 <= d <= MAX_DEGREE for d in degrees):
         raise fail(f"{where}: B-spline degree {degrees} outside 1..{MAX_DEGREE}")
