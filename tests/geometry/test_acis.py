@@ -258,3 +258,27 @@ def test_a_face_with_no_stored_geometry_is_listed_not_a_silent_hole(tmp_path):
     assert any("unsupported_geometry" in n for n in model.notes)
     r = convert(path, MeshParams(tolerance=0.01))
     assert not r.checks.closed and r.input["unsupported_geometry"][0]["surface"] == "spline-surface (rbblnsur)"
+
+
+def test_a_surface_its_vertices_do_not_lie_on_is_listed(tmp_path):
+    """A plane moved 3 mm off its face's vertices (a misread record, or an approximation of another surface) is
+    not meshed as a wrong face: the face is listed with the distance."""
+    text = corpus(SAT + "oda_3dsolids_A5_cyl_v700.sat").read_text()
+    plane = re.search(r"(?m)^plane-surface \$-1 -1 \$-1 50 10 4.9999999999999991 .*#$", text).group(0)
+    path = tmp_path / "moved.sat"
+    path.write_text(text.replace(plane, plane.replace("50 10 4.9999999999999991", "50 10 7.9999999999999991")))
+    model = read_cad(path)
+    assert len(model.unsupported) == 1 and "off its surface" in model.unsupported[0]["why"]
+    assert model.unsupported[0]["surface"] == "plane-surface"
+
+
+def test_a_procedural_surface_uses_its_own_approximation_not_a_nested_one(tmp_path):
+    """An offset surface nests its progenitor (with the progenitor's B-spline); with no approximation of its own it
+    is unsupported_geometry, not the progenitor's surface."""
+    sheet = _spline_sheet()
+    nested = re.search(r"\{ exactsur .*? \}", sheet).group(0)
+    path = tmp_path / "offset.sat"
+    path.write_text(sheet.replace(nested, "{ offsur spline forward " + nested + " 2.5 nullbs }"))
+    with pytest.raises(AmprepError) as err:
+        read_cad(path)  # its only face is left out: nothing remains
+    assert err.value.code == ErrorCode.EMPTY_MODEL

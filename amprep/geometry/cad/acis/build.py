@@ -38,21 +38,22 @@ from OCP.GeomAPI import GeomAPI_ProjectPointOnCurve
 from OCP.gp import gp_Ax2, gp_Ax3, gp_Dir, gp_Pnt
 from OCP.TColgp import TColgp_Array1OfPnt, TColgp_Array2OfPnt
 from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal, TColStd_Array2OfReal
-from OCP.TopoDS import TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shell, TopoDS_Solid, TopoDS_Vertex, TopoDS_Wire
+from OCP.TopoDS import (
+    TopoDS_Compound,
+    TopoDS_Edge,
+    TopoDS_Face,
+    TopoDS_Shell,
+    TopoDS_Solid,
+    TopoDS_Vertex,
+    TopoDS_Wire,
+)
 
+from amprep.geometry.cad.acis.checks import Unsupported, check_on_curve, check_vertices_on
 from amprep.geometry.cad.acis.entities import Cursor, Model
 from amprep.geometry.cad.acis.records import Flag, fail
 from amprep.geometry.cad.acis.splines import BSplineData, find_block, read_block
 
 TOL = 1e-7  # mm-free: ACIS's resabs is 1e-6 in the file's units; OCCT's healing widens where needed
-
-
-class Unsupported(Exception):
-    """A surface or curve with no exact or stored form (kind: its ACIS class)."""
-
-    def __init__(self, kind: str, detail: str = "") -> None:
-        super().__init__(kind)
-        self.kind, self.detail = kind, detail
 
 
 @dataclass
@@ -298,6 +299,7 @@ class Builder:
         first, last = (e.end, e.start) if e.reversed else (e.start, e.end)
         (v1, p1), (v2, p2) = self.vertex(first), self.vertex(last)
         a, b = _parameter(curve, p1), _parameter(curve, p2)
+        check_on_curve(curve, a, b, p1, p2, i)
         if curve.IsPeriodic():
             period = curve.Period()
             span = (b - a) % period
@@ -345,6 +347,7 @@ class Builder:
         for lp in self.chain(f.loop, lambda k: self.m.loop(k).next, "loop"):  # a loop's coedges: wire()
             w = self.wire(lp)
             bb.Add(face, w.Reversed() if flip else w)
+        check_vertices_on(surface, face, self.m.name(f.surface), i)
         return face.Reversed() if flip else face  # type: ignore[return-value]
 
     def body(self, i: int, out: Built) -> None:

@@ -5,8 +5,8 @@ count(s), then (knot, multiplicity) pairs and the control points (x y z, and w w
 surface. The phantom end knots are omitted (an end's multiplicity is at most `degree`): OCCT gets each end's
 multiplicity raised by one (capped at degree + 1, for writers that keep them), and the pole count is
 Σ mult − degree − 1 of that vector. A procedural subtype (a blend, an offset, a
-sweep) stores its approximation the same way, so the first such block of a subtype is the surface or curve to
-build; `nullbs` or `summary` (no control points) means there is none. Counts are checked against the tokens present
+sweep) stores its approximation the same way, so the first such block of a subtype's own data is the surface or
+curve to build (build.py checks that it passes through the face's vertices); `nullbs` or `summary` (no control points) means there is none. Counts are checked against the tokens present
 before anything is allocated.
 """
 
@@ -45,10 +45,18 @@ def _is_int(tok: Token) -> bool:
 
 
 def find_block(tokens: list[Token], surface: bool) -> int | None:
-    """Index of the first `nubs`/`nurbs` that starts a surface block (two degrees) or a curve block (one), or None
-    when the subtype stores none (`nullbs`, `summary`, or a type with no approximation)."""
+    """Index of the first `nubs`/`nurbs` of the subtype's own data (not inside a nested subtype: an offset surface
+    nests its progenitor) that starts a surface block (two degrees) or a curve block (one); None when the subtype
+    stores none (`nullbs`, `summary`, or a type with no approximation)."""
+    depth = 0
     for k, tok in enumerate(tokens):
-        if tok not in ("nubs", "nurbs") or isinstance(tok, Text):  # noqa: PLR1714
+        if isinstance(tok, Text):
+            continue
+        if tok == "{":
+            depth += 1
+        elif tok == "}":
+            depth -= 1
+        if depth or tok not in ("nubs", "nurbs"):  # noqa: PLR1714
             continue
         if surface and k + 3 < len(tokens) and _is_int(tokens[k + 1]) and _is_int(tokens[k + 2]) and _is_word(tokens[k + 3]):
             return k
