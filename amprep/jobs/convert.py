@@ -50,7 +50,7 @@ class ConvertResult:
                 "tolerance": m.tolerance,
                 "max_chordal_error": m.max_error,
                 "within_tolerance": bool(m.max_error <= m.tolerance * (1 + 1e-9)) if m.max_error == m.max_error else None,
-                "fallback_faces": {str(k): v for k, v in sorted(m.fallback_faces.items())},
+                "fallback_faces": {str(k): v for k, v in sorted(m.fallback_faces.items()) if v != "quality"},
                 "unmeshed_faces": list(m.unmeshed_faces),
                 "estimated_triangles": m.estimated_triangles,
             }
@@ -112,7 +112,8 @@ def header_text(result: ConvertResult) -> str:
     text = f"amprep {p['amprep']} occt {p['occt']} cq {p['cadquery']}"
     if result.meshing is not None:
         params = p["params"]
-        text += f" tol {result.meshing.tolerance:g}mm ang {params['angular']:g} {params['algorithm']}"
+        mesher = params["algorithm"] if params.get("mesher", "occt") == "occt" else params["mesher"]
+        text += f" tol {result.meshing.tolerance:g}mm ang {params['angular']:g} {mesher}"
     return text[:80]
 
 

@@ -88,6 +88,11 @@ def _meshing(tolerance: float, help_tolerance: str) -> tuple[Param, ...]:
         Param("angular", "float", 0.5, "Largest angle one segment of a curved edge turns through", "rad", gt=0, le=1.57),
         Param("min_size", "float", 0.0, "Smallest triangle edge (0: tolerance/10)", "mm", ge=0, le=100),
         Param("algorithm", "choice", "delabella", "OCCT mesh algorithm", choices=("delabella", "watson")),
+        Param("mesher", "choice", "occt", "occt: OCCT's BRepMesh, mended by ours where it breaks the tolerance; "
+              "quality: every face by ours (seed 000: planes by constrained Delaunay to a 30° minimum angle, curved "
+              "faces from a (u,v) grid cut near square on the surface, boundary segments graded to the faces' "
+              "width): triangles a finite-element or smoothing user would accept, 2-4× as many at a coarse "
+              "tolerance (docs/meshing.md)", choices=("occt", "quality")),
         Param("occt_edges", "bool", False, "Discretise every B-rep edge as OCCT's BRepMesh does, at half the tolerance "
               "and half the angle (more triangles); off: at 0.95× the tolerance where only ruled faces meet (planes, "
               "cylinders, cones, extrusions)"),

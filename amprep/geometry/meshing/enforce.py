@@ -18,7 +18,13 @@ from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
-from amprep.geometry.meshing.face_mesher import discretize_missing_edges, has_pole, mesh_face, split_edge_to_tolerance
+from amprep.geometry.meshing.face_mesher import (
+    discretize_missing_edges,
+    grade_edges,
+    has_pole,
+    mesh_face,
+    split_edge_to_tolerance,
+)
 from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
 from amprep.geometry.meshing.occt_check import patch_error
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -96,6 +102,8 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     remesh = [i for i in todo if f.surfaces[i] is not None]
     for i in remesh:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
+    if f.params.quality:
+        grade_edges([f.model.faces[i] for i in remesh], f.topo)
 
     def remesh_face(i: int) -> FacePatch | None:
         old = f.patches[i]
@@ -104,7 +112,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
             seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
         try:
             return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
-                             f.params.angular, f.params.check_order, seeds, f.min_area)
+                             f.params.angular, f.params.check_order, seeds, f.min_area, quality=f.params.quality)
         except AmprepError:
             return None
 

@@ -6,8 +6,10 @@ from __future__ import annotations
 import numpy as np
 from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
+from OCP.BRepGProp import BRepGProp
 from OCP.BRepTools import BRepTools_WireExplorer
 from OCP.GCPnts import GCPnts_TangentialDeflection
+from OCP.GProp import GProp_GProps
 from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
@@ -23,7 +25,9 @@ from amprep.geometry.meshing.uv_cdt import (
     apart,
     insertion_points,
     metric_scale,
+    metric_uniform,
     min_spacing,
+    quality_pslg,
     recall_errors,
     triangle_codes,
     triangulate_pslg,
@@ -92,6 +96,66 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
             topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
 
 
+# ---- the quality mesher's edge grading
+# A triangle with good angles on a segment of length s is about 0.87 s high; a face narrower than that (a chamfer
+# strip, a short cylinder band, a plate's long side) can only hold skinny triangles on it, and Triangle may not
+# split a shared edge to mend them. So, before any face of the quality mesher is meshed, each face's width is taken
+# as w = 2A/P (its area over half its perimeter: b for an a × b strip with a ≫ b, the height of a cylinder band)
+# and every segment of the shared edge discretisation longer than GRADE × the smaller width of its two faces is cut
+# into equal parameter steps. The edges stay shared: both faces see the same points.
+
+#: a boundary segment may be at most this many times the width of its narrower face
+GRADE = 3.0
+#: and is cut into at most this many parts (a sliver face's width can be near zero)
+MAX_PARTS = 64
+
+
+def _edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+    curve = BRepAdaptor_Curve(edge)
+    return np.array([curve.Value(float(t)).Coord() for t in params]).reshape(-1, 3)
+
+
+def face_width(face: TopoDS_Face, topo: Topology) -> float:
+    """2A/P of a face: its area (OCCT's surface integral) over half its perimeter (its edges' discretisations)."""
+    props = GProp_GProps()
+    BRepGProp.SurfaceProperties_s(face, props)
+    perimeter = 0.0
+    for edge in face_edges(face):
+        if BRep_Tool.Degenerated_s(edge):
+            continue
+        params = topo.edge_params.get(topo.edge_index(edge))
+        if params is not None and len(params) > 1:
+            perimeter += float(np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1).sum())
+    return 2 * abs(props.Mass()) / perimeter if perimeter > 0 else np.inf
+
+
+def grade_edges(faces: list[TopoDS_Face], topo: Topology) -> None:
+    """Cut the discretised edges of `faces` (their params in topo.edge_params) where a segment is longer than GRADE ×
+    the narrower width of the faces it bounds."""
+    cap: dict[int, tuple[float, object]] = {}
+    for face in faces:
+        w = face_width(face, topo)
+        for edge in face_edges(face):
+            if BRep_Tool.Degenerated_s(edge):
+                continue
+            ei = topo.edge_index(edge)
+            if ei in topo.edge_params and (ei not in cap or GRADE * w < cap[ei][0]):
+                cap[ei] = (GRADE * w, edge)
+    for ei, (limit, edge) in cap.items():
+        params = topo.edge_params[ei]
+        if not np.isfinite(limit) or limit <= 0 or len(params) < 2:
+            continue
+        seg = np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1)
+        parts = np.minimum(np.ceil(seg / limit), MAX_PARTS).astype(np.int64)
+        if (parts <= 1).all():
+            continue
+        steps = [params[:-1, None] + np.diff(params)[:, None] * (np.arange(k) / k)[None, :] for k in np.unique(parts)]
+        new = [params[-1:]]
+        for k, block in zip(np.unique(parts), steps):
+            new.append(block[parts == k].ravel())
+        topo.edge_params[ei] = np.unique(np.concatenate(new))
+
+
 def has_pole(face: TopoDS_Face) -> bool:
     """True when the face has a degenerated edge (a pole or apex: a line of its (u,v) maps to one point)."""
     return any(BRep_Tool.Degenerated_s(e) for e in face_edges(face))
@@ -148,13 +212,15 @@ def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
 
 def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
               angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0,
-              curvature_sized: bool = True) -> FacePatch:
+              curvature_sized: bool = True, quality: bool = False) -> FacePatch:
     """A FacePatch for one face: CDT of its boundary loops in scaled (u,v) plus interior points (when
     `curvature_sized`, on a curved surface with a numpy evaluator and no pole, uv_seed.curvature_seeds' points in
     their stretched space; else `seeds` (k, 2) interior (u,v) points, e.g. an earlier mesh's), points inserted
     (longest inner edge midpoint, else centroid) in every triangle whose chordal error exceeds the tolerance, until
     none does; then flat triangles (area ≤ min_area, or needles) flipped away where a flip keeps the tolerance
-    (patch_refine.flip_flat_triangles)."""
+    (patch_refine.flip_flat_triangles). With `quality` (the quality mesher) the interior points are cut near square
+    on the surface (uv_seed, true_metric) and the triangles refined to a minimum angle where no boundary point is
+    needed (uv_cdt.quality_pslg), in a space whose lengths are the surface's."""
     loops = boundary_loops(face, topo, tolerance, angular)
     if not loops:
         raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
@@ -164,8 +230,11 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     pole = has_pole(face)
     # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
     # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
+    # the quality mesher works in the surface's lengths: where one scale cannot give them (a strongly non-uniform
+    # B-spline parametrisation) it meshes as the default does
+    quality = quality and (surface.affine or metric_uniform(surface, b_uv))
     if curvature_sized and not surface.affine and surface.exact_numpy and not pole:
-        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale)
+        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale, true_metric=quality)
         if seeded is not None:
             seeds, scale = seeded
     spacing = min_spacing(tolerance, scale, length_scale)
@@ -185,7 +254,10 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         # no inside test needed: a seed outside the boundary polygon lies in a hole or concavity that Triangle
         # eats; such seeds are dropped after
         pts = np.concatenate([pts, apart(np.unique(seeds * scale, axis=0), pts, spacing)])
-    tris = triangulate_pslg(pts, segments, holes)
+    if quality and (surface.affine or (scale == length_scale).all()):  # angles in this space are the surface's
+        pts, tris = quality_pslg(pts, segments, holes)
+    else:
+        tris = triangulate_pslg(pts, segments, holes)
     used = np.zeros(len(pts), bool)
     used[:nb] = True
     used[tris] = True

@@ -9,6 +9,8 @@ import numpy as np
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.core.limits import DEFAULT_MAX_TRIANGLES, MIN_TOLERANCE
 
+MESHERS = ("occt", "quality")
+
 
 @dataclass(frozen=True)
 class MeshParams:
@@ -21,6 +23,7 @@ class MeshParams:
     angular: float = 0.5
     min_size: float = 0.0
     algorithm: str = "delabella"
+    mesher: str = "occt"  # occt: BRepMesh, mended by ours; quality: every face by ours (seed 000: CDT, (u,v) grid)
     parallel: bool = True
     enforce_tolerance: bool = True
     force_fallback: bool = False
@@ -30,6 +33,16 @@ class MeshParams:
     occt_surface_control: bool = False  # OCCT's own deflection check of face interiors (ours replaces it)
     max_triangles: int = DEFAULT_MAX_TRIANGLES  # refuse (output_too_large) a model estimated to mesh to more
     mesh_instances_once: bool = True  # an assembly of placed copies of fewer solids: mesh each once (instances.py)
+
+    @property
+    def all_own(self) -> bool:
+        """True when every face is meshed by our own mesher (mesher quality, or the tests' force_fallback)."""
+        return self.force_fallback or self.mesher == "quality"
+
+    @property
+    def quality(self) -> bool:
+        """True for the quality mesher: planes refined to a minimum angle, curved faces smoothed (face_mesher.py)."""
+        return self.mesher == "quality"
 
     def validate(self) -> None:
         """Raise invalid_parameter for values no mesher can honour."""
@@ -44,6 +57,8 @@ class MeshParams:
             bad = f"min size must be ≥ 0, got {self.min_size}"
         elif self.algorithm not in ("delabella", "watson"):
             bad = f"algorithm must be delabella or watson, got {self.algorithm}"
+        elif self.mesher not in MESHERS:
+            bad = f"mesher must be one of {', '.join(MESHERS)}, got {self.mesher}"
         elif not (1 <= self.check_order <= 30):
             bad = f"check order must be 1..30, got {self.check_order}"
         elif not (isinstance(self.max_triangles, int) and self.max_triangles >= 1):

@@ -100,7 +100,7 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
     topo = Topology.of(model.shape)
     n_faces = len(model.faces)
     min_area = DEGENERATE_REL_AREA * bbox_diagonal(model, meshed=True) ** 2  # as checks.degenerate_mask has it
-    bulk = bulk_triangulation_arrays(model.faces) if not params.force_fallback else [None] * n_faces
+    bulk = bulk_triangulation_arrays(model.faces) if not params.all_own else [None] * n_faces
     surfaces: list[Surface | None] = [surface_of(f) if BRep_Tool.Surface_s(f) is not None else None
                                       for f in model.faces]  # none: a tessellated-only face (stored triangles)
     use = _compiled_for(bulk, surfaces, params.check_order)
@@ -108,8 +108,8 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
         load_kernels()
     with compiled(use):  # one evaluator for the whole part, whatever is loaded (core/compiled.py)
         prog("meshing", 0.45)
-        skip = ({i: "large_curved" for i in prepared.own} if not params.force_fallback
-                else dict.fromkeys(range(n_faces), "forced"))
+        skip = ({i: "large_curved" for i in prepared.own} if not params.all_own
+                else dict.fromkeys(range(n_faces), "quality" if params.quality else "forced"))
         looks = first_look(model.faces, topo, bulk, surfaces, skip, params.check_order, min_area)
         patches: list[FacePatch | None] = []
         fallback: dict[int, str] = {}

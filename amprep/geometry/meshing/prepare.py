@@ -35,6 +35,12 @@ class Prepared:
         return self.instancing.template if self.instancing is not None else self.model
 
 
+#: the quality mesher's triangles over the default's, at most, on the corpus at 0.34 mm (docs/regularity_table2.md;
+#: the ratio falls at finer tolerances, where curvature rather than shape sets the size): its estimate is this × the
+#: B-rep estimate, so a cost is refused before it is paid whichever mesher runs
+QUALITY_ESTIMATE_FACTOR = 6
+
+
 def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Instancing | None = None) -> int:
     """The model's estimated triangle count (estimate.py; with `inst`, its template's faces counted once per
     placement); output_too_large, before any meshing, when it exceeds params.max_triangles."""
@@ -43,6 +49,8 @@ def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Inst
     else:
         uses = np.bincount(template_face_of(inst), minlength=len(inst.template.faces))
         n = estimate_triangles(inst.template, tol, params.angular, uses)
+    if params.quality:  # near-equilateral triangles fill what BRepMesh leaves as fans and strips
+        n *= QUALITY_ESTIMATE_FACTOR
     if n > params.max_triangles:
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm this model would mesh to about {n:,} triangles, "
                           f"over the limit of {params.max_triangles:,}: use a coarser tolerance or a higher "
@@ -52,7 +60,7 @@ def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Inst
 
 def own_faces(model: CadModel, params: MeshParams, tol: float) -> list[int]:
     """Ids of the faces meshed by us from the start (large_faces.py), none when not own_large_faces."""
-    if not params.own_large_faces or params.force_fallback:
+    if not params.own_large_faces or params.all_own:
         return []
     return faces_to_mesh_ourselves(model.faces, tol)
 
@@ -65,5 +73,6 @@ def prepare(model: CadModel, params: MeshParams) -> Prepared:
     estimated = refuse_too_large(model, params, tol, inst)
     meshed = inst.template if inst is not None else model
     own = own_faces(meshed, params, tol)
-    run_brepmesh(meshed.shape, tol, params, [meshed.faces[i] for i in own])
+    if not params.all_own:  # the quality mesher meshes every face itself: BRepMesh's work would be thrown away
+        run_brepmesh(meshed.shape, tol, params, [meshed.faces[i] for i in own])
     return Prepared(model, tol, tuple(own), estimated, inst)

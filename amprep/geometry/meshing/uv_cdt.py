@@ -26,6 +26,19 @@ def metric_scale(surface: Surface, uv: np.ndarray) -> np.ndarray:
     return np.where(s > 1e-12, s, 1.0)
 
 
+def metric_uniform(surface: Surface, uv: np.ndarray, spread: float = 4.0) -> bool:
+    """True when |∂S/∂u| and |∂S/∂v| each vary by at most `spread`× over a face's points uv (n, 2) (its boundary
+    and a 5 × 5 grid of its box): one scale then maps (u,v) to the surface's lengths everywhere on it."""
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5)), -1).reshape(-1, 2) * (hi - lo) + lo
+    sample = np.concatenate([uv[:: max(1, len(uv) // 32)], g])
+    h = 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-9)
+    p = surface.evaluate(sample)
+    du = np.linalg.norm(surface.evaluate(sample + [h, 0]) - p, axis=1) / h
+    dv = np.linalg.norm(surface.evaluate(sample + [0, h]) - p, axis=1) / h
+    return bool(du.min() > 0 and dv.min() > 0 and du.max() <= spread * du.min() and dv.max() <= spread * dv.min())
+
+
 def min_spacing(tolerance: float, scale: np.ndarray, length_scale: np.ndarray) -> float:
     """MIN_SPACING × tolerance in mm, as a distance in (u,v) · scale (2,) that keeps points at least that far apart
     in the metric-scaled (u,v) · length_scale (2,) (≈ mm)."""
@@ -59,6 +72,26 @@ def triangulate_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | 
     if len(out.get("vertices", [])) != len(pts):
         raise AmprepError(ErrorCode.MESHING_FAILED, "the face's boundary in (u,v) self-intersects")
     return out.get("triangles", np.zeros((0, 3), np.int64)).astype(np.int64)
+
+
+#: the quality mesher's smallest angle (degrees) in a plane's triangles, Triangle's -q (it terminates up to ~34°)
+MIN_ANGLE = 30.0
+
+
+def quality_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None, min_angle: float = MIN_ANGLE,
+                 max_points: int = 1_000_000) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n + k, 2), triangles (t, 3)): the constrained Delaunay triangulation of points (n, 2) and segments
+    refined by Triangle (Ruppert) until no angle is under `min_angle` where that can be had without a point on a
+    segment (-YY: the segments are shared edges, discretised once); its new points follow the n given ones, and
+    their spacing grades from the segments' lengths. Past max_points new points the plain CDT is returned."""
+    data = dict(vertices=pts, segments=segments)
+    if holes is not None and len(holes):
+        data["holes"] = holes
+    out = tr.triangulate(data, f"pq{min_angle:g}YYQ")
+    verts = out.get("vertices", pts)
+    if len(verts) < len(pts) or not np.array_equal(verts[:len(pts)], pts) or len(verts) - len(pts) > max_points:
+        return pts, triangulate_pslg(pts, segments, holes)
+    return np.asarray(verts, float), out.get("triangles", np.zeros((0, 3), np.int64)).astype(np.int64)
 
 
 _CODE_BASE = 1 << 20

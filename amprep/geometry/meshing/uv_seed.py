@@ -24,6 +24,8 @@ MAX_LEVELS = 16
 MAX_CELLS = 4_000_000
 #: cells at most this many times longer than wide in the triangulation space
 MAX_ASPECT = 2.0
+#: the quality mesher's cells: at most this many times longer than wide on the surface
+QUALITY_ASPECT = 2.0
 #: corners nearer the boundary than this × the cell's shorter side are dropped (no slivers along the boundary)
 KEEP_OFF = 0.25
 #: second derivatives by central differences with this step × the face's (u,v) extent
@@ -121,10 +123,12 @@ def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarra
 
 
 def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float,
-                    length_scale: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+                    length_scale: np.ndarray, true_metric: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """(points (k, 2) interior (u,v) seeds, scale (2,) of the (u,v) space to triangulate them in) for a face with
     boundary loops (closed (u,v) polygons (m, 2)), chords within `target`; `length_scale` (2,): metric_scale's
-    (u,v) → mm. None when the face needs more cells than MAX_CELLS or its box is degenerate."""
+    (u,v) → mm. With `true_metric` (the quality mesher) the cells are cut near square in mm and triangulated in mm,
+    for triangles near-right-angled on the surface rather than in a stretched space (more of them on a face
+    curved one way, as a cylinder). None when the face needs more cells than MAX_CELLS or its box is degenerate."""
     b_uv = np.concatenate(loops)
     if (np.ptp(b_uv, axis=0) * length_scale <= 1e-9).any():
         return None
@@ -133,11 +137,12 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float,
         return None
     centers, sizes = cells
     typical = np.median(sizes * length_scale, axis=0)
-    ratio = np.sqrt(typical[1] / typical[0])
+    ratio = 1.0 if true_metric else np.sqrt(typical[1] / typical[0])
     scale = length_scale * np.array([ratio, 1 / ratio])
     side = sizes * scale
-    ku = np.maximum(np.ceil(side[:, 0] / (MAX_ASPECT * side[:, 1])), 1).astype(np.int64)
-    kv = np.maximum(np.ceil(side[:, 1] / (MAX_ASPECT * side[:, 0])), 1).astype(np.int64)
+    aspect = QUALITY_ASPECT if true_metric else MAX_ASPECT
+    ku = np.maximum(np.ceil(side[:, 0] / (aspect * side[:, 1]) - SLACK), 1).astype(np.int64)
+    kv = np.maximum(np.ceil(side[:, 1] / (aspect * side[:, 0]) - SLACK), 1).astype(np.int64)
     centers, sizes = split_cells(centers, sizes, ku, kv)
     corners = (centers[:, None] + _CORNERS[None] * sizes[:, None]).reshape(-1, 2)
     shorter = np.repeat((sizes * scale).min(axis=1), 4)
