@@ -300,3 +300,17 @@ def test_graded_edges_stay_shared_by_both_faces(reference_solids):
     _closed_solid(r.mesh)
     lengths = np.linalg.norm(np.roll(r.mesh.corners, -1, axis=1) - r.mesh.corners, axis=2)
     assert lengths.max() < 100 / 4, "the 100 mm edges were not cut for the chamfers beside them"
+
+
+def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated():
+    """The quality mesher can outgrow the estimate made before meshing: the limit is checked on the mesh too."""
+    from amprep.errors import AmprepError, ErrorCode
+
+    from amprep.geometry.cad.estimate import estimate_triangles
+    from amprep.geometry.meshing.prepare import QUALITY_ESTIMATE_FACTOR
+
+    model = read_cad(corpus("featuretype_inch_ap214.step"))
+    limit = estimate_triangles(model, 0.01, 0.5) * QUALITY_ESTIMATE_FACTOR + 1000  # passes the estimate
+    with pytest.raises(AmprepError) as err:
+        mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=limit))
+    assert err.value.code == ErrorCode.OUTPUT_TOO_LARGE and "grew to" in err.value.message

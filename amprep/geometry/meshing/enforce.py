@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from amprep.errors import AmprepError
+from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
@@ -120,6 +120,11 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         f.patches[i] = patch
         if patch is None:
             f.unmeshed.append(i)
+    total = sum(len(p.tris) for p in f.patches if p is not None)
+    if total > f.params.max_triangles:  # the estimate before meshing is an estimate: the limit itself is kept here
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew to {total:,} triangles, over the limit of "
+                          f"{f.params.max_triangles:,}: use a coarser tolerance, the default mesher or a higher "
+                          "max_triangles")
 
 
 def _measure(f: FaceStates, round_: int, todo: set[int], first_error: dict[int, np.ndarray], stage: Progress) -> None:
