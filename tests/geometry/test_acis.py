@@ -282,3 +282,101 @@ def test_a_procedural_surface_uses_its_own_approximation_not_a_nested_one(tmp_pa
     with pytest.raises(AmprepError) as err:
         read_cad(path)  # its only face is left out: nothing remains
     assert err.value.code == ErrorCode.EMPTY_MODEL
+
+
+def test_body_transforms_place_rotate_and_scale(tmp_path):
+    """A body's transform (rows: the images of the axes, then the translation and a scale) moves it: DAGMC's two
+    bodies turned 90° about z, doubled and moved by (10, 20, 30): 8× the volume, the box where it must be."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    src = corpus(SAT + "dagmc_sample01_v1900_cubit.sat")
+    identity = "transform $-1 -1 1 0 0 0 1 0 0 0 1 0 0 0 1 no_rotate no_reflect no_shear #"
+    moved = "transform $-1 -1 0 1 0 -1 0 0 0 0 1 10 20 30 2 rotate no_reflect no_shear #"
+    path = tmp_path / "moved.sat"
+    path.write_text(src.read_text().replace(identity, moved))
+    box = Bnd_Box()
+    BRepBndLib.AddOptimal_s(read_cad(path).shape, box, False, False)
+    np.testing.assert_allclose(box.Get(), [-45, -35, -25, 65, 75, 85], atol=1e-6)
+    assert _mesh_volume(path, 0.01) == pytest.approx(8 * (4 / 3 * math.pi * 20**3 + 55**3 - 50**3), rel=2e-3)
+
+
+def _elliptical_frustum(top: float) -> str:
+    """A frustum of an elliptical cone written here: base ellipse a = 10, b = 5 at z = 0, the top `top` × that at
+    z = 10 (1: an elliptical cylinder); volume π a b h (1 + s + s²) / 3."""
+    sine = -(1 - top) * 10 / math.hypot((1 - top) * 10, 10)
+    cosine = 10 / math.hypot((1 - top) * 10, 10)
+    recs = {
+        0: "body $-1 -1 $-1 $1 $-1 $-1 #",
+        1: "lump $-1 -1 $-1 $-1 $2 $0 #",
+        2: "shell $-1 -1 $-1 $-1 $-1 $3 $-1 $1 #",
+        3: "face $-1 -1 $-1 $4 $6 $2 $-1 $10 forward single #",
+        4: "face $-1 -1 $-1 $5 $8 $2 $-1 $11 forward single #",
+        5: "face $-1 -1 $-1 $-1 $9 $2 $-1 $12 forward single #",
+        6: "loop $-1 -1 $-1 $7 $13 $3 #",
+        7: "loop $-1 -1 $-1 $-1 $14 $3 #",
+        8: "loop $-1 -1 $-1 $-1 $15 $4 #",
+        9: "loop $-1 -1 $-1 $-1 $16 $5 #",
+        10: f"cone-surface $-1 -1 $-1 0 0 0 0 0 1 10 0 0 0.5 I I {sine!r} {cosine!r} 10 forward I I I I #",
+        11: "plane-surface $-1 -1 $-1 0 0 0 0 0 -1 1 0 0 forward_v I I I I #",
+        12: "plane-surface $-1 -1 $-1 0 0 10 0 0 1 1 0 0 forward_v I I I I #",
+        13: "coedge $-1 -1 $-1 $13 $13 $15 $17 forward $6 $-1 #",
+        14: "coedge $-1 -1 $-1 $14 $14 $16 $18 reversed $7 $-1 #",
+        15: "coedge $-1 -1 $-1 $15 $15 $13 $17 reversed $8 $-1 #",
+        16: "coedge $-1 -1 $-1 $16 $16 $14 $18 forward $9 $-1 #",
+        17: "edge $-1 -1 $-1 $19 0 $19 6.283185307179586 $13 $21 forward @7 unknown #",
+        18: "edge $-1 -1 $-1 $20 0 $20 6.283185307179586 $14 $22 forward @7 unknown #",
+        19: "vertex $-1 -1 $-1 $17 $23 #",
+        20: "vertex $-1 -1 $-1 $18 $24 #",
+        21: "ellipse-curve $-1 -1 $-1 0 0 0 0 0 1 10 0 0 0.5 I I #",
+        22: f"ellipse-curve $-1 -1 $-1 0 0 10 0 0 1 {10 * top!r} 0 0 0.5 I I #",
+        23: "point $-1 -1 $-1 10 0 0 #",
+        24: f"point $-1 -1 $-1 {10 * top!r} 0 10 #",
+    }
+    head = "700 0 1 0\n@4 test @12 ACIS 32.0 NT @24 Mon Nov 23 10:00:00 2026\n1 9.9999999999999995e-007 1e-010\n"
+    return head + "\n".join(recs[k] for k in range(len(recs))) + "\nEnd-of-ACIS-data\n"
+
+
+@pytest.mark.parametrize("top", [0.5, 1.0], ids=["elliptical_cone", "elliptical_cylinder"])
+def test_elliptical_cones_and_cylinders_are_exact(tmp_path, top):
+    path = tmp_path / "frustum.sat"
+    path.write_text(_elliptical_frustum(top))
+    r = convert(path, MeshParams(tolerance=0.002))
+    assert r.checks.closed and r.input["unsupported_geometry"] == [], r.notes
+    exact = math.pi * 10 * 5 * 10 * (1 + top + top * top) / 3
+    assert abs(_volume(r.mesh) - exact) <= _area(r.mesh) * 0.002, (_volume(r.mesh), exact)
+
+
+def _one_face_solid(surface: str) -> str:
+    recs = ["body $-1 -1 $-1 $1 $-1 $-1 #", "lump $-1 -1 $-1 $-1 $2 $0 #", "shell $-1 -1 $-1 $-1 $-1 $3 $-1 $1 #",
+            "face $-1 -1 $-1 $-1 $-1 $2 $-1 $4 forward single #", surface]
+    head = "700 0 1 0\n@4 test @12 ACIS 32.0 NT @24 Mon Nov 23 10:00:00 2026\n1 9.9999999999999995e-007 1e-010\n"
+    return head + "\n".join(recs) + "\nEnd-of-ACIS-data\n"
+
+
+def test_lemon_torus_solid_and_a_whole_sphere_face():
+    """Faces with no loop: a lemon (major −3, minor 5: the arc of the profile beyond the axis, revolved; volume
+    π ∫ (√(25 − z²) − 3)² dz over |z| ≤ 4) and a ball (a sphere face with no loop)."""
+    import tempfile
+
+    lemon = math.pi * (34 * 8 - 2 * 4**3 / 3 - 6 * (4 * 3 + 25 * math.asin(0.8)))
+    cases = [("torus-surface $-1 -1 $-1 0 0 0 0 0 1 -3 5 1 0 0 forward_v I I I I #", lemon),
+             ("sphere-surface $-1 -1 $-1 1 2 3 4 1 0 0 0 0 1 forward_v I I I I #", 4 / 3 * math.pi * 64)]
+    with tempfile.TemporaryDirectory() as tmp:
+        for record, exact in cases:
+            path = Path(tmp) / "one.sat"
+            path.write_text(_one_face_solid(record))
+            r = convert(path, MeshParams(tolerance=0.001))
+            assert r.checks.closed, (record, r.notes)
+            assert abs(_volume(r.mesh) - exact) <= _area(r.mesh) * 0.001, (record, _volume(r.mesh), exact)
+
+
+def test_stored_pcurves_are_used_on_spline_faces():
+    """AutoCAD's lofted sheet stores exppc pcurves on its B-spline faces: those that fit their edges are used, and
+    the faces mesh within tolerance through them."""
+    from amprep.geometry.cad.acis import read_acis
+
+    path = corpus(SAT + "acad_2004_Surface_LOFTED_v20800.sat")
+    assert read_acis(path.read_bytes()).pcurves_used >= 8
+    r = convert(path, MeshParams(tolerance=0.01))
+    assert r.meshing.max_error <= 0.01 and r.checks.nonmanifold_edges == 0

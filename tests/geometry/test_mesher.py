@@ -305,7 +305,6 @@ def test_graded_edges_stay_shared_by_both_faces(reference_solids):
 def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated():
     """The quality mesher can outgrow the estimate made before meshing: the limit is checked on the mesh too."""
     from amprep.errors import AmprepError, ErrorCode
-
     from amprep.geometry.cad.estimate import estimate_triangles
     from amprep.geometry.meshing.prepare import QUALITY_ESTIMATE_FACTOR
 

@@ -32,6 +32,7 @@ class AcisShape:
     solids: int = 0
     sheets: int = 0
     skipped: list[dict[str, object]] = field(default_factory=list)
+    pcurves_used: int = 0  # stored pcurves put on B-spline faces' edges (the others computed by OCCT's healing)
 
     def notes(self) -> list[str]:
         out = []
@@ -115,7 +116,7 @@ def build_shape(records: Records, unit_of: tuple[float, str] | None = None) -> A
     if not parts:
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the ACIS file holds no face that can be built")
     return AcisShape(compound_of(parts), units, records.header.version, records.header.product, solids, sheets,
-                     built.skipped)
+                     built.skipped, builder.pcurves_used)
 
 
 def read_acis(data: bytes, unit: tuple[float, str] | None = None) -> AcisShape:
@@ -152,6 +153,7 @@ def read_dxf(path: str | Path) -> AcisShape:
         out.solids += one.solids
         out.sheets += one.sheets
         out.skipped += [dict(s, entity=handle) for s in one.skipped]
+        out.pcurves_used += one.pcurves_used
     out.shape = compound_of(shapes)
     return out
 

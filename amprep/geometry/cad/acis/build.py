@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from OCP.BRep import BRep_Builder
-from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeVertex
+from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeVertex
 from OCP.Geom import (
     Geom_BSplineCurve,
     Geom_BSplineSurface,
@@ -50,6 +50,7 @@ from OCP.TopoDS import (
 
 from amprep.geometry.cad.acis.checks import Unsupported, check_on_curve, check_vertices_on
 from amprep.geometry.cad.acis.entities import Cursor, Model
+from amprep.geometry.cad.acis.pcurves import attach, stored_pcurve
 from amprep.geometry.cad.acis.records import Flag, fail
 from amprep.geometry.cad.acis.splines import BSplineData, find_block, read_block
 
@@ -123,7 +124,10 @@ class Builder:
         self._curve: dict[int, Geom_Curve] = {}
         self._surface: dict[int, tuple[Geom_Surface, bool]] = {}
         self._subtypes: list[tuple[int, int]] | None = None
-        self._owned: set[int] = set()  # lumps, shells and faces already placed: each belongs to one owner
+        self._owned: set[int] = set()
+        self._wires: list[TopoDS_Wire] = []
+        self._pcurves: list[tuple[TopoDS_Edge, int, int]] = []  # the face being built: edges, pcurves, records
+        self.pcurves_used = 0  # lumps, shells and faces already placed: each belongs to one owner
 
     # ------------------------------------------------------------ chains
 
@@ -207,11 +211,15 @@ class Builder:
             return bspline_curve(read_block(tokens, k, False, c.where))
         raise Unsupported(name)
 
-    def surface(self, i: int) -> tuple[Geom_Surface, bool]:
-        """(OCCT surface, flipped): flipped when ACIS's surface normal is opposite to the OCCT surface's."""
+    def surface(self, i: int, wires: list[TopoDS_Wire]) -> tuple[Geom_Surface, bool]:
+        """(OCCT surface, flipped): flipped when ACIS's surface normal is opposite to the OCCT surface's; `wires`,
+        the face's, bound the B-spline an elliptical cone becomes (and it is not shared)."""
         got = self._surface.get(i)
         if got is None:
-            got = self._surface[i] = self._make_surface(i)
+            self._wires = wires
+            got = self._make_surface(i)
+            if not isinstance(got[0], Geom_BSplineSurface) or self.m.name(i) != "cone-surface":
+                self._surface[i] = got
         return got
 
     def _make_surface(self, i: int) -> tuple[Geom_Surface, bool]:
@@ -234,10 +242,12 @@ class Builder:
             return Geom_SphericalSurface(ax, abs(radius)), radius < 0
         if name == "torus-surface":
             centre, axis, major, minor, udir = c.vec(), c.vec(), c.num(), c.num(), c.vec()
-            if major < 0 or minor == 0:
-                raise Unsupported(name, "a lemon torus (negative major radius)" if major < 0 else "zero minor radius")
+            if minor == 0 or major <= -abs(minor):
+                raise fail(f"{c.where}: a torus with no surface (minor radius 0, or a lemon of no thickness)")
             ax = gp_Ax3(gp_Pnt(*centre), _unit(axis, c.where), _unit(udir, c.where))
-            return Geom_ToroidalSurface(ax, major, abs(minor)), minor < 0
+            if major >= abs(minor):
+                return Geom_ToroidalSurface(ax, major, abs(minor)), minor < 0
+            return spindle_torus(ax, major, minor)
         if name == "spline-surface":
             rev = c.flag("reversed", "forward")
             tokens = self._subtype_tokens(c)
@@ -274,9 +284,10 @@ class Builder:
             a2 = gp_Ax2(gp_Pnt(*centre), z, x) if ratio < 1 else gp_Ax2(gp_Pnt(*centre), z, z.Crossed(x))
             ell = Geom_Ellipse(a2, max(r, r * ratio), min(r, r * ratio))
             return Geom_SurfaceOfLinearExtrusion(ell, z), rev
+        cone = Geom_ConicalSurface(ax, math.atan2(sine, abs(cosine)), r)
         if abs(ratio - 1) > 1e-12:
-            raise Unsupported("cone-surface", "an elliptical cone")
-        return Geom_ConicalSurface(ax, math.atan2(sine, abs(cosine)), r), rev
+            return elliptical_cone(cone, ratio, self._wires), rev
+        return cone, rev
 
     # ------------------------------------------------------------ topology
 
@@ -335,20 +346,41 @@ class Builder:
                 continue
             edge, same = got
             bb.Add(w, edge if same != co.reversed else edge.Reversed())
+            self._pcurves.append((edge, co.pcurve, co.edge))
         return w
 
     def face(self, i: int) -> TopoDS_Face:
         f = self.m.face(i)
-        surface, flipped = self.surface(f.surface)
+        self._pcurves = []
+        wires = [self.wire(lp) for lp in self.chain(f.loop, lambda k: self.m.loop(k).next, "loop")]
+        surface, flipped = self.surface(f.surface, wires)
         flip = f.reversed != flipped
         bb = BRep_Builder()
         face = TopoDS_Face()
-        bb.MakeFace(face, surface, TOL)
-        for lp in self.chain(f.loop, lambda k: self.m.loop(k).next, "loop"):  # a loop's coedges: wire()
-            w = self.wire(lp)
+        if wires:
+            bb.MakeFace(face, surface, TOL)
+        else:  # a face on a whole closed surface (a ball, a lemon): its natural bounds
+            face = BRepBuilderAPI_MakeFace(surface, TOL).Face()
+        for w in wires:
             bb.Add(face, w.Reversed() if flip else w)
-        check_vertices_on(surface, face, self.m.name(f.surface), i)
+        if wires:  # natural bounds lie on their surface
+            check_vertices_on(surface, face, self.m.name(f.surface), i)
+        if isinstance(surface, Geom_BSplineSurface) and self.m.name(f.surface) == "spline-surface":
+            self._attach_pcurves(face, surface)
         return face.Reversed() if flip else face  # type: ignore[return-value]
+
+    def _attach_pcurves(self, face: TopoDS_Face, surface: Geom_BSplineSurface) -> None:
+        """The face's stored pcurves on its edges where they fit (pcurves.py); an edge met twice (a slit) is left
+        to the healing, which knows its two pcurves."""
+        counts: dict[int, int] = {}
+        for _, _, record in self._pcurves:
+            counts[record] = counts.get(record, 0) + 1
+        for edge, pc, record in self._pcurves:
+            if pc == -1 or counts[record] != 1:
+                continue
+            data = stored_pcurve(self.m, pc)
+            if data is not None and attach(edge, face, surface, data):
+                self.pcurves_used += 1
 
     def body(self, i: int, out: Built) -> None:
         b = self.m.body(i)
@@ -374,6 +406,68 @@ class Builder:
                 for s in shells:
                     bb.Add(solid, s)
                 out.shapes.append((i, solid))
+
+
+def spindle_torus(ax: gp_Ax3, major: float, minor: float) -> tuple[Geom_Surface, bool]:
+    """ACIS's apple (0 ≤ major < |minor|) and lemon (−|minor| < major < 0) tori: the arc of the profile circle
+    (centre at `major` on the x axis, radius |minor|, in the xz plane) on the far side of the axis from −x, between
+    its two crossings of the axis, revolved about it; flipped when OCCT's normal there runs against ACIS's (away
+    from the profile's centre, toward it when minor < 0)."""
+    from OCP.Geom import Geom_SurfaceOfRevolution, Geom_TrimmedCurve
+    from OCP.gp import gp_Ax1, gp_Vec
+
+    r = abs(minor)
+    o, x, z = ax.Location(), ax.XDirection(), ax.Direction()
+    cp = o.Translated(gp_Vec(x).Multiplied(major))
+    circle = Geom_Circle(gp_Ax2(cp, ax.YDirection().Reversed(), x), r)  # cp + r cos t x + r sin t z
+    t0 = math.acos(max(-1.0, min(1.0, -major / r)))
+    surface = Geom_SurfaceOfRevolution(Geom_TrimmedCurve(circle, -t0, t0), gp_Ax1(o, z))
+    p, du, dv = gp_Pnt(), gp_Vec(), gp_Vec()
+    surface.D1(0.0, 0.0, p, du, dv)
+    outward = gp_Vec(x).Multiplied(1.0 if minor > 0 else -1.0)  # at t = 0 the point is cp + r x
+    return surface, du.Crossed(dv).Dot(outward) < 0
+
+
+def elliptical_cone(cone: Geom_ConicalSurface, ratio: float, wires: list[TopoDS_Wire]) -> Geom_BSplineSurface:
+    """ACIS's elliptical cone, the circular `cone` scaled by `ratio` along its y axis: the cone trimmed to the
+    axial span of the face's wires (5 % more each way, never past the apex), converted exactly to a rational
+    B-spline, its poles scaled (an affine map of a rational B-spline's poles maps the surface exactly)."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.Geom import Geom_RectangularTrimmedSurface
+    from OCP.GeomConvert import GeomConvert
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    ax = cone.Position()
+    o, z, y = ax.Location(), ax.Direction(), ax.YDirection()
+    alpha, r = cone.SemiAngle(), cone.RefRadius()
+    heights = []
+    for w in wires:
+        ex = TopExp_Explorer(w, TopAbs_EDGE)
+        while ex.More():
+            c = BRepAdaptor_Curve(TopoDS.Edge_s(ex.Current()))
+            for t in np.linspace(c.FirstParameter(), c.LastParameter(), 9):
+                p = c.Value(float(t))
+                heights.append((p.X() - o.X()) * z.X() + (p.Y() - o.Y()) * z.Y() + (p.Z() - o.Z()) * z.Z())
+            ex.Next()
+    if not heights:
+        raise Unsupported("cone-surface", "an elliptical cone face with no boundary")
+    v = np.array(heights) / math.cos(alpha)
+    pad = 0.05 * float(np.ptp(v)) + 1e-6 * r
+    v0, v1 = float(v.min()) - pad, float(v.max()) + pad
+    if math.sin(alpha) < 0:
+        v1 = min(v1, -r / math.sin(alpha))
+    elif math.sin(alpha) > 0:
+        v0 = max(v0, -r / math.sin(alpha))
+    bs = GeomConvert.SurfaceToBSplineSurface_s(Geom_RectangularTrimmedSurface(cone, 0.0, 2 * math.pi, v0, v1))
+    for i in range(1, bs.NbUPoles() + 1):
+        for j in range(1, bs.NbVPoles() + 1):
+            p = bs.Pole(i, j)
+            d = (p.X() - o.X()) * y.X() + (p.Y() - o.Y()) * y.Y() + (p.Z() - o.Z()) * y.Z()
+            s = (ratio - 1.0) * d
+            bs.SetPole(i, j, gp_Pnt(p.X() + s * y.X(), p.Y() + s * y.Y(), p.Z() + s * y.Z()))
+    return bs
 
 
 def _parameter(curve: Geom_Curve, p: gp_Pnt) -> float:

@@ -58,7 +58,7 @@ def check_vertices_on(surface: Geom_Surface, face: TopoDS_Face, kind: str, i: in
             d = plane.Distance(p)
         else:
             proj = GeomAPI_ProjectPointOnSurf(p, surface)
-            d = proj.LowerDistance() if proj.NbPoints() else math.inf
+            d = proj.LowerDistance() if proj.NbPoints() else 0.0  # no foot: a singular point (apex, pole), let be
         if _off(d, extent, p):
             raise Unsupported(kind, f"face ${i}'s vertices lie {d:.3g} off its surface")
         ex.Next()

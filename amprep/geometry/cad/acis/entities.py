@@ -157,6 +157,7 @@ class Coedge:
     partner: int
     edge: int
     reversed: bool
+    pcurve: int = -1
 
 
 @dataclass(frozen=True)
@@ -243,7 +244,10 @@ class Model:
     def coedge(self, i: int) -> Coedge:
         c = self.cursor(i, "coedge")
         nxt, prev, partner, edge = c.ref(), c.ref(), c.ref(), c.ref()
-        return Coedge(nxt, prev, partner, edge, c.flag("reversed", "forward"))
+        rev = c.flag("reversed", "forward")
+        c.ref()  # its loop (or wire)
+        pcurve = c.ref_after_ints() if c.peek() is not None else -1  # ASM 218+ puts an integer before it
+        return Coedge(nxt, prev, partner, edge, rev, pcurve)
 
     def edge(self, i: int) -> Edge:
         c = self.cursor(i, "edge")

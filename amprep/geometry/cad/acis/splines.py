@@ -90,8 +90,8 @@ def _knot_vector(tokens: list[Token], pos: int, count: int, degree: int, where: 
     return knots, mults, pos + 2 * count
 
 
-def read_block(tokens: list[Token], k: int, surface: bool, where: str) -> BSplineData:
-    """The B-spline starting at tokens[k] (`nubs`/`nurbs`)."""
+def read_block(tokens: list[Token], k: int, surface: bool, where: str, dim: int = 3) -> BSplineData:
+    """The B-spline starting at tokens[k] (`nubs`/`nurbs`), its points of `dim` coordinates (2: a pcurve's)."""
     rational = tokens[k] == "nurbs"
     pos = k + 1
     n_dir = 2 if surface else 1
@@ -117,15 +117,15 @@ def read_block(tokens: list[Token], k: int, surface: bool, where: str) -> BSplin
     n_poles = [int(m.sum()) - deg - 1 for m, deg in zip(mults, degrees)]
     if any(n < deg + 1 for n, deg in zip(n_poles, degrees)):
         raise fail(f"{where}: fewer control points than the degree needs")
-    stride = 4 if rational else 3
+    stride = dim + 1 if rational else dim
     total = int(np.prod(n_poles))
     if total * stride > len(tokens) - pos:
         raise fail(f"{where}: the B-spline data is shorter than its counts say")
     data = _floats(tokens, pos, total * stride, where).reshape(total, stride)
-    weights = data[:, 3] if rational else None
+    weights = data[:, dim] if rational else None
     if weights is not None and np.any(weights <= 0):
         raise fail(f"{where}: a rational B-spline with a weight that is not positive")
     shape = (n_poles[1], n_poles[0]) if surface else (n_poles[0],)
-    poles = data[:, :3].reshape(*shape, 3)
+    poles = data[:, :dim].reshape(*shape, dim)
     return BSplineData(degrees, tuple(knots), tuple(mults), poles,
                        None if weights is None else weights.reshape(shape))
