@@ -6,6 +6,8 @@ Prints a table and writes docs/bench_convert.md and docs/bench_convert.csv.
     python bench/convert.py                   # test parts at 0.1/0.01/0.001, corpus at 0.1/0.01 (+0.001 if small)
     python bench/convert.py --quick           # 0.1 and 0.01 on the test parts and the small corpus parts
     python bench/convert.py --acis --name bench_convert_acis   # the ACIS corpus (SAT, SAB, DXF), amprep only
+    python bench/convert.py --tools amprep,amprep-quality,occt-delabella,occt-watson --only torus_R20,sphere_r12 \
+        --tolerances 0.01,0.001 --name bench_convert_quality     # the quality mesher beside the default and OCCT
 """
 
 from __future__ import annotations
@@ -94,12 +96,12 @@ def _occt_deviation(shape, tol: float) -> float:
 
 def child(tool: str, path: str, tol: float, out: str) -> dict:
     res: dict = {}
-    if tool == "amprep":
+    if tool in ("amprep", "amprep-quality"):
         from amprep.geometry.meshing.params import MeshParams
         from amprep.jobs.convert import convert, write_result
 
         t = time.perf_counter()
-        r = convert(path, MeshParams(tolerance=tol))
+        r = convert(path, MeshParams(tolerance=tol, mesher="quality" if tool == "amprep-quality" else "occt"))
         write_result(r, out)
         res["seconds"] = time.perf_counter() - t
         res["deviation_ratio"] = r.meshing.max_error / tol if r.meshing else None

@@ -220,7 +220,8 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     none does; then flat triangles (area ≤ min_area, or needles) flipped away where a flip keeps the tolerance
     (patch_refine.flip_flat_triangles). With `quality` (the quality mesher) the interior points are cut near square
     on the surface (uv_seed, true_metric) and the triangles refined to a minimum angle where no boundary point is
-    needed (uv_cdt.quality_pslg), in a space whose lengths are the surface's."""
+    needed (uv_cdt.quality_pslg), in a space whose lengths are the surface's; a face with no single scale to them (a
+    strongly non-uniform B-spline) is meshed as the default mesher meshes it."""
     loops = boundary_loops(face, topo, tolerance, angular)
     if not loops:
         raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
@@ -230,9 +231,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     pole = has_pole(face)
     # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
     # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
-    # the quality mesher works in the surface's lengths: where one scale cannot give them (a strongly non-uniform
-    # B-spline parametrisation) it meshes as the default does
-    quality = quality and (surface.affine or metric_uniform(surface, b_uv))
+    quality = quality and (surface.affine or metric_uniform(surface, b_uv))  # one scale to the surface's lengths
     if curvature_sized and not surface.affine and surface.exact_numpy and not pole:
         seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale, true_metric=quality)
         if seeded is not None:
