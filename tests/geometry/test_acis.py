@@ -380,3 +380,24 @@ def test_stored_pcurves_are_used_on_spline_faces():
     assert read_acis(path.read_bytes()).pcurves_used >= 8
     r = convert(path, MeshParams(tolerance=0.01))
     assert r.meshing.max_error <= 0.01 and r.checks.nonmanifold_edges == 0
+
+
+def test_dxf_drawing_unit_scales_its_solids(tmp_path):
+    """A DXF's ACIS data is in drawing units ($INSUNITS): the same drawing saved in inches reads 25.4× larger."""
+    import ezdxf
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    doc = ezdxf.readfile(str(corpus(SAT + "libredwg_example_2013.dxf")))
+    doc.header["$INSUNITS"] = 1
+    path = tmp_path / "inch.dxf"
+    doc.saveas(str(path))
+
+    def volume(p: Path) -> float:
+        props = GProp_GProps()
+        BRepGProp.VolumeProperties_s(read_cad(p).shape, props)
+        return props.Mass()
+
+    model = read_cad(path)
+    assert model.units == "inch"
+    assert volume(path) == pytest.approx(volume(corpus(SAT + "libredwg_example_2013.dxf")) * 25.4**3, rel=1e-9)
