@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 from OCP.BRep import BRep_Tool
-from OCP.BRepAdaptor import BRepAdaptor_Curve
+from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
 from OCP.BRepGProp import BRepGProp
 from OCP.BRepTools import BRepTools_WireExplorer
 from OCP.GCPnts import GCPnts_TangentialDeflection
+from OCP.GeomAbs import GeomAbs_Cone, GeomAbs_Cylinder, GeomAbs_Plane, GeomAbs_Sphere, GeomAbs_Torus
 from OCP.GProp import GProp_GProps
 from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
@@ -17,7 +18,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
-from amprep.geometry.meshing.local_refine import flip_flat_triangles, refine_patch
+from amprep.geometry.meshing.local_refine import flip_flat_triangles, flip_for_angles, refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
@@ -106,6 +107,9 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
 
 #: a boundary segment may be at most this many times the width of its narrower face
 GRADE = 3.0
+ANALYTIC = (GeomAbs_Plane, GeomAbs_Cylinder, GeomAbs_Cone, GeomAbs_Sphere, GeomAbs_Torus)
+#: a boundary segment may be at most its distance from the nearer end × this, plus the shortest segment there
+GROWTH = 1.0
 #: and is cut into at most this many parts (a sliver face's width can be near zero)
 MAX_PARTS = 64
 
@@ -129,31 +133,59 @@ def face_width(face: TopoDS_Face, topo: Topology) -> float:
     return 2 * abs(props.Mass()) / perimeter if perimeter > 0 else np.inf
 
 
-def grade_edges(faces: list[TopoDS_Face], topo: Topology) -> None:
+def _split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
+    """Sorted params (n,) with segment i cut into parts[i] (n−1,) equal parameter steps."""
+    new = [params[-1:]]
+    for k in np.unique(parts):
+        rows = parts == k
+        new.append((params[:-1][rows, None] + np.diff(params)[rows, None] * (np.arange(k) / k)[None, :]).ravel())
+    return np.unique(np.concatenate(new))
+
+
+def grade_edges(faces: list[TopoDS_Face], topo: Topology, floor: float = 0.0) -> None:
     """Cut the discretised edges of `faces` (their params in topo.edge_params) where a segment is longer than GRADE ×
-    the narrower width of the faces it bounds."""
+    the narrower width of the faces it bounds, or than GROWTH × its distance from the nearer end plus the shortest
+    segment at that end's vertex (over every edge there): a long segment beside a short one can only make
+    slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends). No size is set
+    below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
+    free_form: set[int] = set()  # edges of a B-spline or other free-form face: a straight edge can be curved in its
+    # (u,v) there, and its points, cut finer, make ears of three that the face's Delaunay keeps: no growth grading
     for face in faces:
         w = face_width(face, topo)
+        analytic = BRepAdaptor_Surface(face, False).GetType() in ANALYTIC
         for edge in face_edges(face):
             if BRep_Tool.Degenerated_s(edge):
                 continue
             ei = topo.edge_index(edge)
+            if not analytic:
+                free_form.add(ei)
             if ei in topo.edge_params and (ei not in cap or GRADE * w < cap[ei][0]):
                 cap[ei] = (GRADE * w, edge)
-    for ei, (limit, edge) in cap.items():
-        params = topo.edge_params[ei]
-        if not np.isfinite(limit) or limit <= 0 or len(params) < 2:
-            continue
-        seg = np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1)
-        parts = np.minimum(np.ceil(seg / limit), MAX_PARTS).astype(np.int64)
-        if (parts <= 1).all():
-            continue
-        steps = [params[:-1, None] + np.diff(params)[:, None] * (np.arange(k) / k)[None, :] for k in np.unique(parts)]
-        new = [params[-1:]]
-        for k, block in zip(np.unique(parts), steps):
-            new.append(block[parts == k].ravel())
-        topo.edge_params[ei] = np.unique(np.concatenate(new))
+    for _ in range(2):
+        points = {ei: _edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
+                  if len(topo.edge_params[ei]) >= 2}
+        at_vertex: dict[int, float] = {}
+        for ei, pts in points.items():
+            seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+            v1, _, v2, _ = topo.edge_ends(cap[ei][1])  # type: ignore[arg-type]
+            for v, s in ((v1, seg[0]), (v2, seg[-1])):
+                at_vertex[v] = min(at_vertex.get(v, np.inf), float(s))
+        for ei, pts in points.items():
+            limit, edge = cap[ei]
+            seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+            along = np.concatenate([[0.0], np.cumsum(seg)])
+            mid = (along[:-1] + along[1:]) / 2
+            v1, _, v2, _ = topo.edge_ends(edge)  # type: ignore[arg-type]
+            size = np.minimum(at_vertex[v1] + GROWTH * mid, at_vertex[v2] + GROWTH * (along[-1] - mid))
+            if ei in free_form:
+                size = np.full_like(seg, np.inf)
+            if np.isfinite(limit) and limit > 0:
+                size = np.minimum(size, limit)
+            size = np.maximum(size, floor)
+            parts = np.minimum(np.ceil(seg / np.maximum(size, 1e-12)), MAX_PARTS).astype(np.int64)
+            if (parts > 1).any():
+                topo.edge_params[ei] = _split_segments(topo.edge_params[ei], parts)
 
 
 def has_pole(face: TopoDS_Face) -> bool:
@@ -279,22 +311,24 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     if (err > tolerance).any():
         # insertions re-triangulate only around them, except at a pole or apex (there a line of (u,v) is one point
         # and a local re-triangulation leaves tilted triangles in the fan)
-        refined = None if pole else refine_patch(patch, err, surface, tolerance, order, scale=scale)
+        refined = None if pole or quality else refine_patch(patch, err, surface, tolerance, order, scale=scale)
         if refined is None:
             pts, tris, xyz, err = _refine_globally(pts, tris, err, segments, holes, scale, xyz, surface, tolerance,
-                                                   order, spacing)
+                                                   order, spacing, quality)
             k = len(pts) - len(node_vertex)
             refined = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris,
                                 np.concatenate([node_vertex, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_edge, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_param, np.full(k, np.nan)]), meshed_by="fallback", error=err)
         patch = refined
+    if quality and not surface.affine:
+        patch = flip_for_angles(patch, surface, tolerance, order)
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
 
 
 def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segments: np.ndarray, holes: np.ndarray,
                      scale: np.ndarray, xyz: np.ndarray, surface: Surface, tolerance: float,
-                     order: int, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                     order: int, spacing: float, quality: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The robust path when a local re-triangulation cannot be made: points inserted (no nearer than `spacing` to
     another, in the space of pts = uv · scale) in every triangle over the tolerance and the whole face triangulated
     again, until none is over (`err` (t,): the error of the first `tris`); returns (pts, tris, xyz, error)."""
@@ -320,7 +354,10 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
         if not len(new):
             break
         pts = np.concatenate([pts, new])
-        tris = triangulate_pslg(pts, segments, holes)
+        if quality:  # the quality mesher's minimum angle kept through the refinement
+            pts, tris = quality_pslg(pts, segments, holes)
+        else:
+            tris = triangulate_pslg(pts, segments, holes)
     uv = pts / scale
     if len(xyz) < len(pts):
         xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])

@@ -185,3 +185,64 @@ def flip_flat_triangles(patch: FacePatch, surface: Surface, tolerance: float, or
         tris[t], tris[n] = new
         err[t], err[n] = e
     return replace(patch, tris=tris, error=err)
+
+
+#: the quality mesher's flips: passes, and the least gain (radians) of the pair's smallest angle that a flip needs
+FLIP_PASSES = 8
+FLIP_GAIN = 1e-3
+
+
+def min_angles(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(t,) smallest angle (radians) of each triangle (t, 3) of nodes (k, 3) in space; 0 for a degenerate one."""
+    c = xyz[tris]
+    a = np.roll(c, -1, axis=1) - c
+    b = np.roll(c, -2, axis=1) - c
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.einsum("tkd,tkd->tk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
+    return np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1.0, 1.0)).min(axis=1)
+
+
+def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t1, k1, t2, k2): triangle t1's side k1 (corners k1, k1+1) is triangle t2's side k2, for every shared side."""
+    t = np.repeat(np.arange(len(tris)), 3)
+    k = np.tile(np.arange(3), len(tris))
+    code = edge_codes(tris, n).ravel()  # row t·3 + k: side k of triangle t
+    order = np.argsort(code, kind="stable")
+    pair = np.flatnonzero(code[order][1:] == code[order][:-1])
+    first, second = order[pair], order[pair + 1]
+    return t[first], k[first], t[second], k[second]
+
+
+def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6) -> FacePatch:
+    """The quality mesher's finish of a curved face: shared sides flipped (Lawson, on the surface rather than in
+    (u,v), where a single scale cannot make the two agree) wherever the two triangles' smallest angle in space
+    grows by FLIP_GAIN, both keep their (u,v) orientation and both stay within the tolerance; each pass flips a set
+    of sides no two of which share a triangle (the best claim on each), for FLIP_PASSES passes."""
+    if patch.uv is None or patch.error is None:
+        return patch
+    tris, err, xyz, uv = patch.tris.copy(), patch.error.copy(), patch.nodes, patch.uv
+    sign = 1.0 if _signed_area2(uv, tris).sum() >= 0 else -1.0
+    for _ in range(FLIP_PASSES):
+        t1, k1, t2, k2 = _shared_sides(tris, len(xyz))
+        a, b, c = tris[t1, k1], tris[t1, (k1 + 1) % 3], tris[t1, (k1 + 2) % 3]
+        new1, new2 = np.stack([a, tris[t2, (k2 + 2) % 3], c], axis=1), np.stack([tris[t2, (k2 + 2) % 3], b, c], axis=1)
+        gain = np.minimum(min_angles(xyz, new1), min_angles(xyz, new2)) - np.minimum(min_angles(xyz, tris[t1]),
+                                                                                 min_angles(xyz, tris[t2]))
+        ok = np.flatnonzero((gain > FLIP_GAIN) & (sign * _signed_area2(uv, new1) > 0) & (sign * _signed_area2(uv, new2) > 0))
+        if not len(ok):
+            break
+        rank = np.empty(len(ok), np.int64)
+        rank[np.argsort(-gain[ok], kind="stable")] = np.arange(len(ok))
+        best = np.full(len(tris), len(ok), np.int64)
+        np.minimum.at(best, t1[ok], rank)
+        np.minimum.at(best, t2[ok], rank)
+        pick = ok[(best[t1[ok]] == rank) & (best[t2[ok]] == rank)]
+        both = np.concatenate([new1[pick], new2[pick]])
+        e = triangle_chordal_error(xyz[both], uv[both], surface, order, affine=surface.affine)
+        keep = (e[:len(pick)] <= tolerance) & (e[len(pick):] <= tolerance)
+        if not keep.any():
+            break
+        p = pick[keep]
+        tris[t1[p]], tris[t2[p]] = new1[p], new2[p]
+        err[t1[p]], err[t2[p]] = e[:len(pick)][keep], e[len(pick):][keep]
+    return replace(patch, tris=tris, error=err)
