@@ -298,12 +298,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     xyz = surface.evaluate(pts / scale)
     err = triangle_chordal_error(xyz[tris], (pts / scale)[tris], surface, order, affine=surface.affine,
                                  stop=tolerance)
-    node_vertex = np.full(len(pts), -1, np.int64)
-    node_edge = np.full(len(pts), -1, np.int64)
-    node_param = np.full(len(pts), np.nan)
-    node_vertex[:nb] = np.concatenate([lp["vertex"] for lp in loops])
-    node_edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
-    node_param[:nb] = np.concatenate([lp["param"] for lp in loops])
+    node_vertex, node_edge, node_param = _node_keys(loops, len(pts))
     # CDT triangles are counter-clockwise in (u,v): outward when the surface normal S_u × S_v points out
     flip = winds_inward(face)
     patch = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris, node_vertex, node_edge,
@@ -324,6 +319,16 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     if quality and not surface.affine:
         patch = flip_for_angles(patch, surface, tolerance, order)
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
+
+
+def _node_keys(loops: list[dict], n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[type-arg]
+    """(vertex, edge, param) each (n,) of n nodes whose first ones are the loops' boundary nodes (−1/nan after)."""
+    nb = sum(len(lp["uv"]) for lp in loops)
+    vertex, edge, param = np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.full(n, np.nan)
+    vertex[:nb] = np.concatenate([lp["vertex"] for lp in loops])
+    edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
+    param[:nb] = np.concatenate([lp["param"] for lp in loops])
+    return vertex, edge, param
 
 
 def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segments: np.ndarray, holes: np.ndarray,
