@@ -306,7 +306,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     if (err > tolerance).any():
         # insertions re-triangulate only around them, except at a pole or apex (there a line of (u,v) is one point
         # and a local re-triangulation leaves tilted triangles in the fan)
-        refined = None if pole or quality else refine_patch(patch, err, surface, tolerance, order, scale=scale)
+        refined = None if pole else refine_patch(patch, err, surface, tolerance, order, scale=scale)
         if refined is None:
             pts, tris, xyz, err = _refine_globally(pts, tris, err, segments, holes, scale, xyz, surface, tolerance,
                                                    order, spacing, quality)
@@ -316,7 +316,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
                                 np.concatenate([node_edge, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_param, np.full(k, np.nan)]), meshed_by="fallback", error=err)
         patch = refined
-    if quality and not surface.affine:
+    if quality and surface.surface_type not in ("plane", "cylinder", "cone", "sphere", "torus"):  # (u,v) ≠ lengths
         patch = flip_for_angles(patch, surface, tolerance, order)
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
 
