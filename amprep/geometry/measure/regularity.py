@@ -16,6 +16,16 @@ def side_lengths(corners: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)
 
 
+def min_angles(corners: np.ndarray) -> np.ndarray:
+    """(m,) smallest angle (radians) of each triangle of (m, 3, 3) corners; 0 for one with a zero-length side."""
+    a = np.roll(corners, -1, axis=1) - corners  # angle at corner k between the sides to corners k+1 and k+2
+    b = np.roll(corners, -2, axis=1) - corners
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.einsum("mkd,mkd->mk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
+    angles = np.arccos(np.clip(cos, -1.0, 1.0))
+    return np.where(np.isfinite(angles).all(axis=1), np.where(np.isfinite(angles), angles, 0).min(axis=1), 0.0)
+
+
 def regularity(corners: np.ndarray) -> dict[str, np.ndarray]:
     """Per triangle of (m, 3, 3) corners: angle q_a = α_min / 60°; area q_A = 4√3·A / (l₁² + l₂² + l₃²);
     edge q_e = l_min / l_max. Each (m,) in [0, 1]."""
@@ -26,12 +36,7 @@ def regularity(corners: np.ndarray) -> dict[str, np.ndarray]:
         q_area = np.where(sq > 0, 4 * np.sqrt(3) * area / sq, 0.0)
         lmax = lengths.max(axis=1)
         q_edge = np.where(lmax > 0, lengths.min(axis=1) / lmax, 0.0)
-        # angle at corner k between the sides to corners k+1 and k+2
-        a = np.roll(corners, -1, axis=1) - corners
-        b = np.roll(corners, -2, axis=1) - corners
-        cos = np.einsum("mkd,mkd->mk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
-        angles = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    q_angle = np.where(np.isfinite(angles).all(axis=1), np.nanmin(np.where(np.isfinite(angles), angles, 0), axis=1) / 60.0, 0.0)
+    q_angle = np.degrees(min_angles(corners)) / 60.0
     return {"angle": np.clip(q_angle, 0, 1), "area": np.clip(q_area, 0, 1), "edge": np.clip(q_edge, 0, 1)}
 
 

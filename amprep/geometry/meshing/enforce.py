@@ -103,7 +103,8 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     for i in remesh:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
     if f.params.quality:
-        grade_edges([f.model.faces[i] for i in remesh], f.topo, f.tol)
+        grade_edges([f.model.faces[i] for i in remesh], [f.surfaces[i].surface_type for i in remesh],  # type: ignore[union-attr]
+                    f.topo, f.tol)
 
     def remesh_face(i: int) -> FacePatch | None:
         old = f.patches[i]

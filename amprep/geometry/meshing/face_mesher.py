@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 from OCP.BRep import BRep_Tool
-from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
+from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepGProp import BRepGProp
 from OCP.BRepTools import BRepTools_WireExplorer
 from OCP.GCPnts import GCPnts_TangentialDeflection
-from OCP.GeomAbs import GeomAbs_Cone, GeomAbs_Cylinder, GeomAbs_Plane, GeomAbs_Sphere, GeomAbs_Torus
 from OCP.GProp import GProp_GProps
 from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
@@ -107,7 +106,8 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
 
 #: a boundary segment may be at most this many times the width of its narrower face
 GRADE = 3.0
-ANALYTIC = (GeomAbs_Plane, GeomAbs_Cylinder, GeomAbs_Cone, GeomAbs_Sphere, GeomAbs_Torus)
+#: surface types (Surface.surface_type) whose (u,v) maps boundary lines and circles to lines in (u,v)
+ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
 #: a boundary segment may be at most its distance from the nearer end × this, plus the shortest segment there
 GROWTH = 1.0
 #: and is cut into at most this many parts (a sliver face's width can be near zero)
@@ -142,18 +142,18 @@ def _split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate(new))
 
 
-def grade_edges(faces: list[TopoDS_Face], topo: Topology, floor: float = 0.0) -> None:
-    """Cut the discretised edges of `faces` (their params in topo.edge_params) where a segment is longer than GRADE ×
-    the narrower width of the faces it bounds, or than GROWTH × its distance from the nearer end plus the shortest
-    segment at that end's vertex (over every edge there): a long segment beside a short one can only make
-    slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends). No size is set
+def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floor: float = 0.0) -> None:
+    """Cut the discretised edges of `faces` (surface types `kinds`; their params in topo.edge_params) where a
+    segment is longer than GRADE × the narrower width of the faces it bounds, or than GROWTH × its distance from the
+    nearer end plus the shortest segment at that end's vertex (over every edge there): a long segment beside a
+    short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends). No size is set
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
     free_form: set[int] = set()  # edges of a B-spline or other free-form face: a straight edge can be curved in its
     # (u,v) there, and its points, cut finer, make ears of three that the face's Delaunay keeps: no growth grading
-    for face in faces:
+    for face, kind in zip(faces, kinds, strict=True):
         w = face_width(face, topo)
-        analytic = BRepAdaptor_Surface(face, False).GetType() in ANALYTIC
+        analytic = kind in ANALYTIC
         for edge in face_edges(face):
             if BRep_Tool.Degenerated_s(edge):
                 continue
@@ -316,7 +316,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
                                 np.concatenate([node_edge, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_param, np.full(k, np.nan)]), meshed_by="fallback", error=err)
         patch = refined
-    if quality and surface.surface_type not in ("plane", "cylinder", "cone", "sphere", "torus"):  # (u,v) ≠ lengths
+    if quality and surface.surface_type not in ANALYTIC:  # one scale only approximates the surface's lengths
         patch = flip_for_angles(patch, surface, tolerance, order)
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
 

@@ -13,6 +13,7 @@ from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import edge_codes
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
+from amprep.geometry.measure.regularity import min_angles
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
@@ -192,16 +193,6 @@ FLIP_PASSES = 8
 FLIP_GAIN = 1e-3
 
 
-def min_angles(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(t,) smallest angle (radians) of each triangle (t, 3) of nodes (k, 3) in space; 0 for a degenerate one."""
-    c = xyz[tris]
-    a = np.roll(c, -1, axis=1) - c
-    b = np.roll(c, -2, axis=1) - c
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.einsum("tkd,tkd->tk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
-    return np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1.0, 1.0)).min(axis=1)
-
-
 def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t1, k1, t2, k2): triangle t1's side k1 (corners k1, k1+1) is triangle t2's side k2, for every shared side."""
     t = np.repeat(np.arange(len(tris)), 3)
@@ -226,8 +217,8 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         t1, k1, t2, k2 = _shared_sides(tris, len(xyz))
         a, b, c = tris[t1, k1], tris[t1, (k1 + 1) % 3], tris[t1, (k1 + 2) % 3]
         new1, new2 = np.stack([a, tris[t2, (k2 + 2) % 3], c], axis=1), np.stack([tris[t2, (k2 + 2) % 3], b, c], axis=1)
-        gain = np.minimum(min_angles(xyz, new1), min_angles(xyz, new2)) - np.minimum(min_angles(xyz, tris[t1]),
-                                                                                 min_angles(xyz, tris[t2]))
+        gain = (np.minimum(min_angles(xyz[new1]), min_angles(xyz[new2]))
+                - np.minimum(min_angles(xyz[tris[t1]]), min_angles(xyz[tris[t2]])))
         ok = np.flatnonzero((gain > FLIP_GAIN) & (sign * _signed_area2(uv, new1) > 0) & (sign * _signed_area2(uv, new2) > 0))
         if not len(ok):
             break

@@ -13,9 +13,10 @@ from OCP.TopAbs import TopAbs_SHELL
 from OCP.TopoDS import TopoDS, TopoDS_Shape
 
 from amprep.errors import AmprepError, ErrorCode, is_occt_failure
-from amprep.geometry.cad.acis.build import Builder, Built, bodies, compound_of
+from amprep.geometry.cad.acis.build import Builder, Built, bodies
 from amprep.geometry.cad.acis.entities import Model, Transform
 from amprep.geometry.cad.acis.records import Records, fail, parse
+from amprep.geometry.cad.topology import compound, explore
 
 #: unit scales ACIS headers carry (mm per model unit) and their names
 UNIT_NAMES = {1.0: "mm", 10.0: "cm", 1000.0: "m", 25.4: "inch", 304.8: "ft", 0.001: "um", 1e6: "km"}
@@ -88,7 +89,6 @@ def _heal(shape: TopoDS_Shape, precision: float) -> TopoDS_Shape:
 def build_shape(records: Records, unit_of: tuple[float, str] | None = None) -> AcisShape:
     """The bodies of parsed ACIS records as one compound: a solid per closed lump, open shells for sheets."""
     from amprep.geometry.cad.read import free_edge_count
-    from amprep.geometry.cad.topology import explore
 
     model = Model(records)
     unit, units = _unit(records, unit_of)
@@ -115,7 +115,7 @@ def build_shape(records: Records, unit_of: tuple[float, str] | None = None) -> A
             sheets += 1
     if not parts:
         raise AmprepError(ErrorCode.EMPTY_MODEL, "the ACIS file holds no face that can be built")
-    return AcisShape(compound_of(parts), units, records.header.version, records.header.product, solids, sheets,
+    return AcisShape(compound(parts), units, records.header.version, records.header.product, solids, sheets,
                      built.skipped, builder.pcurves_used)
 
 
@@ -154,7 +154,7 @@ def read_dxf(path: str | Path) -> AcisShape:
         out.sheets += one.sheets
         out.skipped += [dict(s, entity=handle) for s in one.skipped]
         out.pcurves_used += one.pcurves_used
-    out.shape = compound_of(shapes)
+    out.shape = compound(shapes)
     return out
 
 

@@ -39,7 +39,6 @@ from OCP.gp import gp_Ax2, gp_Ax3, gp_Dir, gp_Pnt
 from OCP.TColgp import TColgp_Array1OfPnt, TColgp_Array2OfPnt
 from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal, TColStd_Array2OfReal
 from OCP.TopoDS import (
-    TopoDS_Compound,
     TopoDS_Edge,
     TopoDS_Face,
     TopoDS_Shell,
@@ -53,18 +52,17 @@ from amprep.geometry.cad.acis.entities import Cursor, Model
 from amprep.geometry.cad.acis.pcurves import attach, stored_pcurve
 from amprep.geometry.cad.acis.records import Flag, fail
 from amprep.geometry.cad.acis.splines import BSplineData, find_block, read_block
+from amprep.geometry.cad.occt_arrays import to_array1
 
 TOL = 1e-7  # mm-free: ACIS's resabs is 1e-6 in the file's units; OCCT's healing widens where needed
 
 
 @dataclass
 class Built:
-    """Solids and open shells per body, and the faces left out: [{"face": record, "surface": class, "why": …}]."""
+    """(body record, solid) of every lump with faces, and the faces left out: [{"face", "surface", "why"}]."""
 
     shapes: list[object] = field(default_factory=list)
     skipped: list[dict[str, object]] = field(default_factory=list)
-    faces: int = 0
-    sheets: int = 0
 
 
 def _unit(v: tuple[float, float, float], where: str) -> gp_Dir:
@@ -78,22 +76,15 @@ def _norm(v: tuple[float, float, float]) -> float:
     return math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
 
 
-def _array1(values: np.ndarray, cls):  # type: ignore[no-untyped-def]
-    out = cls(1, len(values))
-    for i, v in enumerate(values.tolist(), 1):
-        out.SetValue(i, v)
-    return out
-
-
 def bspline_curve(d: BSplineData) -> Geom_BSplineCurve:
     poles = TColgp_Array1OfPnt(1, len(d.poles))
     for i, p in enumerate(d.poles.tolist(), 1):
         poles.SetValue(i, gp_Pnt(*p))
-    knots = _array1(d.knots[0], TColStd_Array1OfReal)
-    mults = _array1(d.mults[0], TColStd_Array1OfInteger)
+    knots = to_array1(d.knots[0], TColStd_Array1OfReal)
+    mults = to_array1(d.mults[0], TColStd_Array1OfInteger)
     if d.weights is None:
         return Geom_BSplineCurve(poles, knots, mults, d.degrees[0])
-    return Geom_BSplineCurve(poles, _array1(d.weights, TColStd_Array1OfReal), knots, mults, d.degrees[0])
+    return Geom_BSplineCurve(poles, to_array1(d.weights, TColStd_Array1OfReal), knots, mults, d.degrees[0])
 
 
 def bspline_surface(d: BSplineData) -> Geom_BSplineSurface:
@@ -102,8 +93,8 @@ def bspline_surface(d: BSplineData) -> Geom_BSplineSurface:
     for v in range(nv):
         for u, p in enumerate(d.poles[v].tolist()):
             poles.SetValue(u + 1, v + 1, gp_Pnt(*p))
-    ku, kv = (_array1(k, TColStd_Array1OfReal) for k in d.knots)
-    mu, mv = (_array1(m, TColStd_Array1OfInteger) for m in d.mults)
+    ku, kv = (to_array1(k, TColStd_Array1OfReal) for k in d.knots)
+    mu, mv = (to_array1(m, TColStd_Array1OfInteger) for m in d.mults)
     if d.weights is None:
         return Geom_BSplineSurface(poles, ku, kv, mu, mv, d.degrees[0], d.degrees[1])
     w = TColStd_Array2OfReal(1, nu, 1, nv)
@@ -118,16 +109,14 @@ class Builder:
 
     def __init__(self, model: Model) -> None:
         self.m = model
-        self.limit = len(model.records) + 1  # no chain of next-references can be longer than the file
         self._vertex: dict[int, tuple[TopoDS_Vertex, gp_Pnt]] = {}
         self._edge: dict[int, tuple[TopoDS_Edge, bool] | None] = {}
         self._curve: dict[int, Geom_Curve] = {}
         self._surface: dict[int, tuple[Geom_Surface, bool]] = {}
         self._subtypes: list[tuple[int, int]] | None = None
-        self._owned: set[int] = set()
-        self._wires: list[TopoDS_Wire] = []
+        self._owned: set[int] = set()  # lumps, shells, faces and coedges placed: each belongs to one owner
         self._pcurves: list[tuple[TopoDS_Edge, int, int]] = []  # the face being built: edges, pcurves, records
-        self.pcurves_used = 0  # lumps, shells and faces already placed: each belongs to one owner
+        self.pcurves_used = 0
 
     # ------------------------------------------------------------ chains
 
@@ -141,8 +130,6 @@ class Builder:
                 if ring and i == first:
                     return
                 raise fail(f"the {what} chain from ${first} loops back on ${i}")
-            if len(seen) > self.limit:
-                raise fail(f"the {what} chain from ${first} is longer than the file")
             seen.add(i)
             if not ring:
                 if i in self._owned:
@@ -202,7 +189,7 @@ class Builder:
                 return Geom_Ellipse(gp_Ax2(gp_Pnt(*centre), n, x), r, r * ratio)
             y = n.Crossed(x)  # minor longer than major: OCCT's x axis is the longer one, still counter-clockwise
             return Geom_Ellipse(gp_Ax2(gp_Pnt(*centre), n, y), r * ratio, r)
-        if name.endswith("intcurve-curve") or name == "intcurve-curve":
+        if name.endswith("intcurve-curve"):
             c.flag("reversed", "forward")
             tokens = self._subtype_tokens(c)
             k = find_block(tokens, surface=False)
@@ -216,13 +203,12 @@ class Builder:
         the face's, bound the B-spline an elliptical cone becomes (and it is not shared)."""
         got = self._surface.get(i)
         if got is None:
-            self._wires = wires
-            got = self._make_surface(i)
+            got = self._make_surface(i, wires)
             if not isinstance(got[0], Geom_BSplineSurface) or self.m.name(i) != "cone-surface":
                 self._surface[i] = got
         return got
 
-    def _make_surface(self, i: int) -> tuple[Geom_Surface, bool]:
+    def _make_surface(self, i: int, wires: list[TopoDS_Wire]) -> tuple[Geom_Surface, bool]:
         name, c = self.m.geometry(i)
         if name == "plane-surface":
             root, normal, udir = c.vec(), c.vec(), c.vec()
@@ -233,7 +219,7 @@ class Builder:
                 ax = gp_Ax3(gp_Pnt(*root), n)
             return Geom_Plane(ax), False
         if name == "cone-surface":
-            return self._cone(c)
+            return self._cone(c, wires)
         if name == "sphere-surface":
             centre, radius, udir, pole = c.vec(), c.num(), c.vec(), c.vec()
             if radius == 0:
@@ -258,9 +244,10 @@ class Builder:
             return bspline_surface(read_block(tokens, k, True, c.where)), rev
         raise Unsupported(name)
 
-    def _cone(self, c: Cursor) -> tuple[Geom_Surface, bool]:
+    def _cone(self, c: Cursor, wires: list[TopoDS_Wire]) -> tuple[Geom_Surface, bool]:
         """ACIS cone: base ellipse (centre, axis, major axis vector, ratio), sine and cosine of the half angle
-        (cosine < 0: the axis runs the other way), an optional u scale, and its reversal word."""
+        (cosine < 0: the axis runs the other way), an optional u scale, and its reversal word; an elliptical cone
+        is bounded by the face's `wires` (elliptical_cone)."""
         centre, axis, major = c.vec(), c.vec(), c.vec()
         ratio = c.num()
         nxt = c.peek()
@@ -286,7 +273,7 @@ class Builder:
             return Geom_SurfaceOfLinearExtrusion(ell, z), rev
         cone = Geom_ConicalSurface(ax, math.atan2(sine, abs(cosine)), r)
         if abs(ratio - 1) > 1e-12:
-            return elliptical_cone(cone, ratio, self._wires), rev
+            return elliptical_cone(cone, ratio, wires), rev
         return cone, rev
 
     # ------------------------------------------------------------ topology
@@ -392,7 +379,6 @@ class Builder:
                 bb.MakeShell(shell)
                 n = 0
                 for fi in self.chain(self.m.shell(sh).face, lambda k: self.m.face(k).next, "face"):
-                    out.faces += 1
                     try:
                         bb.Add(shell, self.face(fi))
                         n += 1
@@ -483,13 +469,4 @@ def bodies(model: Model) -> list[int]:
     return [i for i, n in enumerate(model.records.names) if n == "body"]
 
 
-def compound_of(shapes: list) -> TopoDS_Compound:  # type: ignore[type-arg]
-    bb = BRep_Builder()
-    comp = TopoDS_Compound()
-    bb.MakeCompound(comp)
-    for s in shapes:
-        bb.Add(comp, s)
-    return comp
-
-
-__all__ = ["Builder", "Built", "Unsupported", "bodies", "compound_of"]
+__all__ = ["Builder", "Built", "Unsupported", "bodies"]

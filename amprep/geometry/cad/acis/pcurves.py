@@ -17,16 +17,10 @@ from OCP.TopoDS import TopoDS_Edge, TopoDS_Face
 
 from amprep.geometry.cad.acis.entities import Model
 from amprep.geometry.cad.acis.splines import BSplineData, find_block, read_block
+from amprep.geometry.cad.occt_arrays import to_array1
 
 #: a stored pcurve is used when its points lie this close (× the edge's length, plus round-off) to the edge
 FIT = 1e-4
-
-
-def _array1(values: np.ndarray, cls):  # type: ignore[no-untyped-def]
-    out = cls(1, len(values))
-    for i, v in enumerate(values.tolist(), 1):
-        out.SetValue(i, v)
-    return out
 
 
 def bspline_2d(d: BSplineData, negate: bool = False) -> Geom2d_BSplineCurve:
@@ -39,10 +33,10 @@ def bspline_2d(d: BSplineData, negate: bool = False) -> Geom2d_BSplineCurve:
     arr = TColgp_Array1OfPnt2d(1, len(poles))
     for i, (u, v) in enumerate(poles.tolist(), 1):
         arr.SetValue(i, gp_Pnt2d(u, v))
-    k, m = _array1(knots, TColStd_Array1OfReal), _array1(mults, TColStd_Array1OfInteger)
+    k, m = to_array1(knots, TColStd_Array1OfReal), to_array1(mults, TColStd_Array1OfInteger)
     if weights is None:
         return Geom2d_BSplineCurve(arr, k, m, d.degrees[0])
-    return Geom2d_BSplineCurve(arr, _array1(weights, TColStd_Array1OfReal), k, m, d.degrees[0])
+    return Geom2d_BSplineCurve(arr, to_array1(weights, TColStd_Array1OfReal), k, m, d.degrees[0])
 
 
 def stored_pcurve(model: Model, i: int) -> BSplineData | None:

@@ -94,13 +94,14 @@ class Records:
 _BOUNDARY = re.compile(r"@(\d+) |#")
 _WORD = re.compile(r"\{|\}|[^\s{}]+")
 _COUNTED = re.compile(r"\s*@(\d+) ")
+_HEADER_STRING = re.compile(r"\s*@?(\d+) ?")
 
 
 def _counted_strings(line: str) -> list[str]:
     """The strings of a SAT header line: `[@]n chars` repeated (AutoCAD writes `0` for an empty date)."""
     out, i = [], 0
     while i < len(line):
-        m = re.compile(r"\s*@?(\d+) ?").match(line, i)
+        m = _HEADER_STRING.match(line, i)
         if not m:
             break
         n = int(m.group(1))
