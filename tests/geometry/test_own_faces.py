@@ -1,15 +1,14 @@
-"""Large doubly curved faces meshed by us from the start, not by BRepMesh (own_faces.py)."""
+"""Large doubly curved faces meshed by us from the start, not by BRepMesh (prepare.py)."""
 
 import numpy as np
 import pytest
 
 from amprep.geometry.cad.read import model_from_shape, read_cad
 from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
-from amprep.geometry.meshing import large_faces as own_faces
 from amprep.geometry.meshing import prepare
-from amprep.geometry.meshing.large_faces import expected_triangles
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
+from amprep.geometry.meshing.prepare import expected_triangles
 from tests.conftest import corpus
 
 
@@ -59,7 +58,7 @@ def test_forced_own_faces_next_to_occt_faces_close_by_topology(name, monkeypatch
     """Every torus face taken from BRepMesh whatever its size (the threshold forced to 0): BRepMesh meshes the rest
     of the part, our faces meet its faces through their shared edge discretisation, and the part is closed and
     within tolerance."""
-    monkeypatch.setattr(own_faces, "OWN_MESH_MIN", 0)
+    monkeypatch.setattr(prepare, "OWN_MESH_MIN", 0)
     model = read_cad(corpus(name)) if "." in name else model_from_shape(_cut_torus())
     r = mesh_model(model, MeshParams(tolerance=0.1))
     own = sorted(i for i, why in r.fallback_faces.items() if why == "large_curved")

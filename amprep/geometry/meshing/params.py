@@ -29,7 +29,7 @@ class MeshParams:
     force_fallback: bool = False
     check_order: int = 6  # the barycentric grid order the faces' chordal error is checked on
     occt_edges: bool = False  # every edge at half the tolerance and angle, as BRepMesh does (brepmesh.py)
-    own_large_faces: bool = True  # mesh large torus faces ourselves, not with BRepMesh (own_faces.py)
+    own_large_faces: bool = True  # mesh large torus faces ourselves, not with BRepMesh (prepare.py)
     occt_surface_control: bool = False  # OCCT's own deflection check of face interiors (ours replaces it)
     max_triangles: int = DEFAULT_MAX_TRIANGLES  # refuse (output_too_large) a model estimated to mesh to more
     mesh_instances_once: bool = True  # an assembly of placed copies of fewer solids: mesh each once (instances.py)
