@@ -19,12 +19,14 @@ from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
 from amprep.geometry.meshing.face_mesher import (
+    boundary_loops,
     discretize_missing_edges,
     grade_edges,
     has_pole,
     mesh_face,
     split_edge_to_tolerance,
 )
+from amprep.geometry.meshing.lattice import mesh_lattice, plan_lattices
 from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
 from amprep.geometry.meshing.occt_check import patch_error
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -66,6 +68,7 @@ class FaceStates:
     fallback: dict[int, str]
     errors: list[np.ndarray] = field(init=False)
     unmeshed: list[int] = field(default_factory=list)
+    lattice: set[int] = field(default_factory=set)  # faces whose rows lattice.plan_lattices set
 
     def __post_init__(self) -> None:
         self.errors = [np.zeros(0)] * len(self.patches)
@@ -103,8 +106,12 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     for i in remesh:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
     if f.params.quality:
-        grade_edges([f.model.faces[i] for i in remesh], [f.surfaces[i].surface_type for i in remesh],  # type: ignore[union-attr]
-                    f.topo, f.tol)
+        faces = [f.model.faces[i] for i in remesh]
+        grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
+        planned = plan_lattices(faces, [f.surfaces[i] for i in remesh],  # type: ignore[misc]
+                                [boundary_loops(face, f.topo, target, f.params.angular) for face in faces], f.topo,
+                                target, f.params.angular)
+        f.lattice.update(i for i, p in zip(remesh, planned, strict=True) if p)
 
     def remesh_face(i: int) -> FacePatch | None:
         old = f.patches[i]
@@ -112,6 +119,12 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         if old is not None and old.uv is not None:
             seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
         try:
+            if i in f.lattice:
+                face = f.model.faces[i]
+                lattice = mesh_lattice(i, face, boundary_loops(face, f.topo, target, f.params.angular),
+                                       f.surfaces[i], target, f.params.angular, f.params.check_order)  # type: ignore[arg-type]
+                if lattice is not None:
+                    return lattice
             return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
                              f.params.angular, f.params.check_order, seeds, f.min_area, quality=f.params.quality)
         except AmprepError:

@@ -194,12 +194,12 @@ def has_pole(face: TopoDS_Face) -> bool:
 
 
 def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
-    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,); an edge with
-    no discretisation yet gets one."""
+    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,), and segment
+    (n,) the B-rep edge of the segment from each node to the next; an edge with no discretisation yet gets one."""
     discretize_missing_edges(face, topo, tolerance, angular)
     loops = []
     for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
-        uvs, verts, edges, pars = [], [], [], []
+        uvs, verts, edges, pars, segs = [], [], [], [], []
         wexp = BRepTools_WireExplorer(wire, face)
         while wexp.More():
             edge = TopoDS.Edge_s(wexp.Current())
@@ -222,10 +222,11 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             verts.append(vtx)
             edges.append(np.where(vtx >= 0, -1, ei))
             pars.append(np.where(vtx >= 0, np.nan, params[:n]))
+            segs.append(np.full(n, ei, np.int64))
             wexp.Next()
         if uvs:
             loops.append(dict(uv=np.array(uvs, float), vertex=np.concatenate(verts),
-                              edge=np.concatenate(edges), param=np.concatenate(pars)))
+                              edge=np.concatenate(edges), param=np.concatenate(pars), segment=np.concatenate(segs)))
     return loops
 
 

@@ -1,0 +1,362 @@
+"""The quality mesher's closed-form lattice for analytic curved faces (cylinder, cone, sphere, torus) whose (u,v)
+domain is a rectangle bounded by iso-lines: rows of constant v, spaced and filled in closed form from the surface's
+principal curvatures so that every triangle keeps the chord tolerance, zipped into triangles row by row, with no
+Delaunay and no refinement rounds (seed 000's grid on curved faces, cut here to the face by its own iso-lines)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from OCP.BRep import BRep_Tool
+from OCP.TopoDS import TopoDS_Face
+
+from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
+from amprep.geometry.measure.chordal import triangle_chordal_error
+from amprep.geometry.meshing.local_refine import refine_patch
+from amprep.geometry.meshing.occt_read import FacePatch
+
+#: closed_form kinds (cad/surfaces.py) the lattice meshes: cylinder, cone, sphere, torus
+KINDS = (1, 2, 3, 4)
+#: the share of the tolerance the lattice's own bound (|κu|·b² + |κv|·h²)/8 aims at, for what the bound leaves out
+#: (the curvature's change across a triangle, a zipped row's uneven apex)
+SAFETY = 0.85
+#: base over height b/h of the lattice's triangles: from 0.75 (rows 1.33 b apart where the surface is flat across the
+#: rows: the staggered triangle's smallest angle 41°) to 2 (rows b/2 apart where it curves most across them: 45°)
+ASPECT = (0.75, 2.0)
+#: a row has at most this many times fewer points than the given boundary row before it
+GROW = 1.6
+#: samples of v where the row spacing is worked out
+SAMPLES = 129
+#: a face needing more rows is left to the Delaunay path
+MAX_ROWS = 100_000
+#: a face whose lattice would have fewer triangles is left to the Delaunay path, whose refinement gives small faces
+#: better angles (a short row's staggered ends, a given boundary row's count meeting the lattice's) and costs little
+LATTICE_MIN = 1_000
+
+
+@dataclass(frozen=True)
+class Sides:
+    """A face's boundary as the four sides of its (u,v) rectangle [u0,u1]×[v0,v1]: node indices into the loop, left and
+    right (u = u0, u1) sorted by v, bottom and top (v = v0, v1) sorted by u; `pole` (bottom, top): the side is one
+    point (a degenerated edge), its B-rep vertex or −1; `edges` (left, right, bottom, top): the one B-rep edge each
+    side runs along, −1 where it runs along several."""
+
+    u0: float
+    u1: float
+    v0: float
+    v1: float
+    left: np.ndarray
+    right: np.ndarray
+    bottom: np.ndarray
+    top: np.ndarray
+    pole: tuple[int, int]
+    edges: tuple[int, int, int, int]
+
+
+def rectangle_sides(loop: dict) -> Sides | None:  # type: ignore[type-arg]
+    """The loop's Sides when every boundary segment runs along a side of its (u,v) bounding box and the loop goes once
+    round it (its area is the box's); None otherwise (a face trimmed by anything but iso-lines)."""
+    uv = loop["uv"]
+    if len(uv) < 4:
+        return None
+    (u0, v0), (u1, v1) = uv.min(axis=0), uv.max(axis=0)
+    if not (u1 - u0 > 0 and v1 - v0 > 0):
+        return None
+    eps_u, eps_v = 1e-9 * (1 + abs(u0) + abs(u1)), 1e-9 * (1 + abs(v0) + abs(v1))
+    on = np.stack([abs(uv[:, 0] - u0) <= eps_u, abs(uv[:, 0] - u1) <= eps_u,
+                   abs(uv[:, 1] - v0) <= eps_v, abs(uv[:, 1] - v1) <= eps_v], axis=1)  # left right bottom top
+    if not (on & np.roll(on, -1, axis=0)).any(axis=1).all():
+        return None
+    x, y = uv[:, 0], uv[:, 1]
+    area = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    if abs(abs(area) - (u1 - u0) * (v1 - v0)) > 1e-6 * (u1 - u0) * (v1 - v0):
+        return None
+    idx = [np.flatnonzero(on[:, k]) for k in range(4)]
+    idx = [i[np.argsort(uv[i, 1 if k < 2 else 0], kind="stable")] for k, i in enumerate(idx)]
+
+    def pole(side: np.ndarray) -> int:
+        vtx = loop["vertex"][side]
+        return int(vtx[0]) if vtx[0] >= 0 and (vtx == vtx[0]).all() else -1
+
+    def edge(k: int) -> int:
+        seg = loop["segment"][on[:, k] & np.roll(on[:, k], -1)]
+        return int(seg[0]) if len(seg) and (seg == seg[0]).all() else -1
+
+    return Sides(float(u0), float(u1), float(v0), float(v1), *idx, pole=(pole(idx[2]), pole(idx[3])),
+                 edges=(edge(0), edge(1), edge(2), edge(3)))
+
+
+def _metric(surface: Surface, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(ρ, g, κu, κv) each (n,) at v: the row's radius (the length of S_u), the length of S_v, and the absolute normal
+    curvatures along u and v (the principal ones: these surfaces are of revolution about their axis)."""
+    kind, d = surface.closed_form  # type: ignore[misc]
+    a, b = float(d[12]), float(d[13])
+    one = np.ones_like(v)
+    if kind == 1:  # cylinder, radius a
+        return a * one, one, one / a, 0 * one
+    if kind == 2:  # cone, reference radius a, semi-angle b
+        rho = np.abs(a + v * np.sin(b))
+        return rho, one, np.abs(np.cos(b)) / np.maximum(rho, 1e-300), 0 * one
+    if kind == 3:  # sphere, radius a
+        return np.abs(a * np.cos(v)), a * one, one / a, one / a
+    rho = a + b * np.cos(v)  # torus, major a, minor b
+    return rho, b * one, np.abs(np.cos(v)) / np.maximum(np.abs(rho), 1e-300), one / b
+
+
+def spacing(surface: Surface, v: np.ndarray, tolerance: float, angular: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(b, h) each (n,): the spacing along a row (u) and between rows (v), in mm, at v: b = λh with λ = √(κv/κu)
+    clipped to ASPECT (the largest triangle for the bound) and (κu·b² + κv·h²)/8 = SAFETY × tolerance; neither over
+    the arc of `angular` radians (the edges' angular deflection), b/h kept in ASPECT, neither under the tolerance
+    (near a cone's apex, where κu grows without bound); and True when curvature alone set them (no arc cap) on at
+    least 3/4 of the samples."""
+    _, _, ku, kv = _metric(surface, v)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = np.where(ku > 0, np.clip(np.sqrt(kv / ku), *ASPECT), ASPECT[1])
+    h = np.sqrt(8 * SAFETY * tolerance / (ku * lam**2 + kv))
+    b_arc = np.where(ku > 0, angular / np.maximum(ku, 1e-300), np.inf)
+    h_arc = np.where(kv > 0, angular / np.maximum(kv, 1e-300), np.inf)
+    by_curvature = bool(np.mean((lam * h > b_arc) | (h > h_arc)) <= 0.25)  # an apex's neighbourhood aside
+    b = np.minimum(lam * h, b_arc)
+    h = np.minimum(np.minimum(h, h_arc), b / ASPECT[0])
+    b = np.minimum(b, h * ASPECT[1])
+    return np.maximum(b, tolerance), np.maximum(h, tolerance), by_curvature
+
+
+def row_values(surface: Surface, v0: float, v1: float, tolerance: float, angular: float) -> np.ndarray | None:
+    """(N+1,) the rows' v from v0 to v1: equal steps of ∫ g/h dv, the rows' count along the face, N its ceiling; None
+    over MAX_ROWS, or where the edges' angular deflection rather than curvature sets the size (a coarse tolerance on a
+    small radius: there the Delaunay path's grading makes fewer, better triangles)."""
+    vs = np.linspace(v0, v1, SAMPLES)
+    _, g, _, _ = _metric(surface, vs)
+    _, h, by_curvature = spacing(surface, vs, tolerance, angular)
+    if not by_curvature:
+        return None
+    f = g / h
+    count = np.concatenate([[0.0], np.cumsum((f[1:] + f[:-1]) / 2 * np.diff(vs))])
+    if not count[-1] < MAX_ROWS:
+        return None
+    n = max(1, int(np.ceil(count[-1] - 1e-9)))
+    rows = np.interp(np.linspace(0, count[-1], n + 1), count, vs)
+    rows[0], rows[-1] = v0, v1
+    return rows
+
+
+def expected_triangles(surface: Surface, sides: Sides, rows: np.ndarray, tolerance: float, angular: float) -> float:
+    """2 Σ_k ρ_k·|u1 − u0| / b_k over the rows: about the lattice's triangle count."""
+    rho, _, _, _ = _metric(surface, rows)
+    b, _, _ = spacing(surface, rows, tolerance, angular)
+    return float(2 * np.sum(rho * (sides.u1 - sides.u0) / b))
+
+
+# ---- planning: before any face is meshed, the rows are written into the shared edge discretisation
+def _param_of_v(face: TopoDS_Face, edge, rows: np.ndarray) -> np.ndarray | None:  # type: ignore[no-untyped-def]
+    """(N+1,) parameters of an iso-v-line edge at the rows' v, sorted (its pcurve on the face: v affine in t), or
+    None when v is not affine in t."""
+    first, last = BRep_Tool.Range_s(edge)
+    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+    if pc is None:
+        return None
+    va, vm, vb = (pc.Value(t).Y() for t in (first, 0.5 * (first + last), last))
+    if abs(vb - va) <= 0 or abs(vm - 0.5 * (va + vb)) > 1e-9 * (1 + abs(vb - va)):
+        return None
+    t = first + (rows - va) * (last - first) / (vb - va)
+    t = np.sort(np.clip(t, min(first, last), max(first, last)))
+    t[0], t[-1] = min(first, last), max(first, last)
+    return t
+
+
+def _edge_v(face: TopoDS_Face, edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+    return np.sort([pc.Value(float(t)).Y() for t in params])
+
+
+def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list[list[dict]], topo: Topology,  # type: ignore[type-arg]
+                  tolerance: float, angular: float) -> list[bool]:
+    """For each face a lattice can mesh (one loop, rectangle_sides, a closed-form surface of KINDS): its left and
+    right side edges discretised at its rows (row_values), or, where an earlier face set one, the face takes those
+    rows when both sides agree; its bottom and top edges' segments split where the row next to them needs it. Returns
+    which faces were planned (only those are meshed by mesh_lattice)."""
+    fixed: set[int] = getattr(topo, "_lattice_edges", set())
+    planned = [False] * len(faces)
+    for k, (face, surface, lps) in enumerate(zip(faces, surfaces, loops, strict=True)):
+        if (surface is None or surface.closed_form is None or surface.closed_form[0] not in KINDS
+                or len(lps) != 1 or (sides := rectangle_sides(lps[0])) is None):
+            continue
+        edges = {e: edge for e, edge in ((topo.edge_index(x), x) for x in face_edges(face))}
+        lr = list(sides.edges[:2])
+        if min(lr) < 0:
+            continue
+        rows = row_values(surface, sides.v0, sides.v1, tolerance, angular)
+        if rows is None or expected_triangles(surface, sides, rows, tolerance, angular) < LATTICE_MIN:
+            continue
+        given = [_edge_v(face, edges[e], topo.edge_params[e]) for e in lr if e in fixed]
+        if given:
+            if any(len(g) != len(given[0]) or not np.allclose(g, given[0], rtol=0, atol=1e-9) for g in given):
+                continue
+            rows = given[0]
+        new = {e: _param_of_v(face, edges[e], rows) for e in set(lr) if e not in fixed}
+        if any(p is None for p in new.values()):
+            continue
+        for e, p in new.items():
+            topo.edge_params[e] = p
+            fixed.add(e)
+        _split_ends(face, surface, sides, rows, edges, topo, tolerance, fixed)
+        planned[k] = True
+    topo._lattice_edges = fixed  # type: ignore[attr-defined]
+    return planned
+
+
+def _split_ends(face: TopoDS_Face, surface: Surface, sides: Sides, rows: np.ndarray, edges: dict,  # type: ignore[type-arg]
+                topo: Topology, tolerance: float, fixed: set[int]) -> None:
+    """Split the bottom and top edges' segments whose chord, with the first row's height beside it, would make
+    (κu·b² + κv·h²)/8 exceed the tolerance."""
+    for e, v, h in ((sides.edges[2], rows[0], rows[1] - rows[0]), (sides.edges[3], rows[-1], rows[-1] - rows[-2])):
+        rho, g, ku, kv = _metric(surface, np.array([v]))
+        room = 8 * tolerance - kv[0] * (g[0] * h) ** 2
+        if ku[0] <= 0 or room <= 0:
+            continue
+        if e < 0 or e in fixed or BRep_Tool.Degenerated_s(edges[e]):
+            continue
+        params = topo.edge_params[e]
+        pc = BRep_Tool.CurveOnSurface_s(edges[e], face, 0.0, 0.0)
+        u = np.array([pc.Value(float(t)).X() for t in params])
+        parts = np.ceil(np.abs(np.diff(u)) * rho[0] / np.sqrt(room / ku[0])).astype(np.int64)
+        if (parts > 1).any():
+            steps = [params[:-1][i] + np.diff(params)[i] * np.arange(k) / k for i, k in enumerate(parts)]
+            topo.edge_params[e] = np.unique(np.concatenate([*steps, params[-1:]]))
+
+
+# ---- meshing
+def _zip(a: np.ndarray, au: np.ndarray, b: np.ndarray, bu: np.ndarray, pair: np.ndarray,
+         pb: np.ndarray) -> np.ndarray:
+    """(m, 3) triangles, counter-clockwise in (u,v), between consecutive rows: a, au (n,) the lower rows' node ids and
+    u, concatenated, `pair` (n,) which pair each belongs to; b, bu, pb the upper rows'. Each pair's segments, merged
+    by their midpoints' u, make one triangle each: a lower segment with the upper node reached, or the reverse."""
+    sa = pair[:-1] == pair[1:]  # segments of the lower rows: consecutive nodes of one pair
+    sb = pb[:-1] == pb[1:]
+    ia, ib = np.flatnonzero(sa), np.flatnonzero(sb)
+    key = np.concatenate([(au[ia] + au[ia + 1]) / 2, (bu[ib] + bu[ib + 1]) / 2])
+    src = np.concatenate([np.zeros(len(ia), np.int8), np.ones(len(ib), np.int8)])
+    grp = np.concatenate([pair[ia], pb[ib]])
+    order = np.lexsort((src, key, grp))
+    s, g = src[order], grp[order]
+    first_a = np.searchsorted(pair, np.arange(g.max() + 1 if len(g) else 0))  # each pair's first node in a, b
+    first_b = np.searchsorted(pb, np.arange(g.max() + 1 if len(g) else 0))
+    cum_a, cum_b = np.cumsum(s == 0), np.cumsum(s == 1)
+    start = np.searchsorted(g, g)  # position of the pair's first item
+    before_a = cum_a - (s == 0) - np.where(start > 0, cum_a[start - 1], 0)
+    before_b = cum_b - (s == 1) - np.where(start > 0, cum_b[start - 1], 0)
+    pa, pbn = first_a[g] + before_a, first_b[g] + before_b
+    lower = s == 0
+    t0 = a[pa]
+    t1 = np.where(lower, a[np.minimum(pa + 1, len(a) - 1)], b[np.minimum(pbn + 1, len(b) - 1)])
+    t2 = b[pbn]
+    return np.stack([t0, t1, t2], axis=1)
+
+
+def _row_nodes(n: np.ndarray, u0: float, u1: float, stagger: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(row (m,), u (m,)): interior rows' nodes, n[k] segments from u0 to u1, ends excluded; a staggered row's nodes
+    half a step on (its end segments half long)."""
+    counts = np.where(stagger, n, n - 1)
+    row = np.repeat(np.arange(len(n)), counts)
+    j = np.arange(len(row)) - np.repeat(np.cumsum(counts) - counts, counts)
+    step = (u1 - u0) / n[row]
+    return row, u0 + step * (j + np.where(stagger[row], 0.5, 1.0))
+
+
+def mesh_lattice(face_id: int, face: TopoDS_Face, loops: list[dict], surface: Surface, tolerance: float,  # type: ignore[type-arg]
+                 angular: float, order: int = 6) -> FacePatch | None:
+    """A FacePatch of the face's lattice, measured (and refined locally where a triangle is over the tolerance);
+    None when the face is not one (rectangle_sides, KINDS) or its left and right sides' rows disagree."""
+    if surface.closed_form is None or surface.closed_form[0] not in KINDS or len(loops) != 1:
+        return None
+    loop = loops[0]
+    sides = rectangle_sides(loop)
+    if sides is None or len(sides.left) != len(sides.right) or len(sides.left) < 2:
+        return None
+    uv_loop = loop["uv"]
+    rows = uv_loop[sides.left, 1]
+    if not np.allclose(rows, uv_loop[sides.right, 1], rtol=0, atol=1e-9 * (1 + np.abs(rows).max())):
+        return None
+    built = _lattice_nodes(loop, sides, rows, surface, tolerance, angular)
+    if built is None:
+        return None
+    uv, vertex, edge, param, tris = built
+    xyz = surface.evaluate(uv)
+    err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, stop=tolerance)
+    patch = FacePatch(face_id, xyz, uv, tris[:, [0, 2, 1]] if winds_inward(face) else tris, vertex, edge, param,
+                      meshed_by="lattice", error=err)
+    if (err > tolerance).any():
+        return refine_patch(patch, err, surface, tolerance, order)
+    return patch
+
+
+def _lattice_nodes(loop: dict, sides: Sides, rows: np.ndarray, surface: Surface, tolerance: float,  # type: ignore[type-arg]
+                   angular: float) -> tuple[np.ndarray, ...] | None:
+    """(uv (k, 2), vertex, edge, param (k,), tris (t, 3)) of the lattice: the loop's nodes, the interior rows' nodes
+    and, at a pole, one node per triangle of its fan (all keyed to the pole's vertex, each at its triangle's u)."""
+    uv_loop = loop["uv"]
+    nb, nrow = len(uv_loop), len(rows)
+    rho, _, _, _ = _metric(surface, rows)
+    b, _, _ = spacing(surface, rows, tolerance, angular)
+    full = surface.periods[0] is not None and abs(sides.u1 - sides.u0 - surface.periods[0]) <= 1e-9
+    n = np.maximum(np.ceil(rho * (sides.u1 - sides.u0) / b - 1e-9).astype(np.int64), 3 if full else 1)
+    k = np.arange(nrow)
+    for end, side, dist in ((0, sides.bottom, k), (1, sides.top, nrow - 1 - k)):
+        if sides.pole[end] < 0:  # a row near a finely cut boundary row is graded towards it
+            n = np.maximum(n, np.ceil((len(side) - 1) / GROW ** dist.astype(float)).astype(np.int64))
+    inner = n[1:-1]
+    r_row, r_u = _row_nodes(inner, sides.u0, sides.u1, (np.arange(1, nrow - 1) % 2) == 1)
+    r_row += 1
+    # each row's node ids in u order: left end, interior, right end (the loop's side nodes)
+    ids_inner = nb + np.arange(len(r_row))
+    row_ids = [sides.bottom, *([] for _ in range(nrow - 2)), sides.top]
+    row_u = [uv_loop[sides.bottom, 0], *([] for _ in range(nrow - 2)), uv_loop[sides.top, 0]]
+    splits = np.searchsorted(r_row, np.arange(1, nrow))
+    for i in range(1, nrow - 1):
+        sl = slice(splits[i - 1], splits[i])
+        row_ids[i] = np.concatenate([[sides.left[i]], ids_inner[sl], [sides.right[i]]])
+        row_u[i] = np.concatenate([[sides.u0], r_u[sl], [sides.u1]])
+    uv = np.concatenate([uv_loop, np.stack([r_u, rows[r_row]], axis=1)])
+    vertex = np.concatenate([loop["vertex"], np.full(len(r_row), -1, np.int64)])
+    edge = np.concatenate([loop["edge"], np.full(len(r_row), -1, np.int64)])
+    param = np.concatenate([loop["param"], np.full(len(r_row), np.nan)])
+    lo = [p for p in range(nrow - 1) if not (p == 0 and sides.pole[0] >= 0) and not (p == nrow - 2 and sides.pole[1] >= 0)]
+    tris = [np.zeros((0, 3), np.int64)]
+    if lo:
+        a = np.concatenate([row_ids[p] for p in lo])
+        au = np.concatenate([row_u[p] for p in lo])
+        pair = np.repeat(np.arange(len(lo)), [len(row_ids[p]) for p in lo])
+        bb = np.concatenate([row_ids[p + 1] for p in lo])
+        bu = np.concatenate([row_u[p + 1] for p in lo])
+        pb = np.repeat(np.arange(len(lo)), [len(row_ids[p + 1]) for p in lo])
+        tris.append(_zip(a, au, bb, bu, pair, pb))
+    extra_uv, extra_v = [uv], [vertex]
+    count = len(uv)
+    for end in (0, 1):  # fans at poles
+        if sides.pole[end] < 0:
+            continue
+        if nrow < 3:
+            return None
+        ring = row_ids[1] if end == 0 else row_ids[-2]
+        ru = row_u[1] if end == 0 else row_u[-2]
+        m = len(ring) - 1
+        pole_ids = count + np.arange(m)
+        count += m
+        extra_uv.append(np.stack([(ru[:-1] + ru[1:]) / 2, np.full(m, rows[0] if end == 0 else rows[-1])], axis=1))
+        extra_v.append(np.full(m, sides.pole[end], np.int64))
+        fan = np.stack([pole_ids, ring[1:], ring[:-1]], axis=1) if end == 0 else \
+            np.stack([ring[:-1], ring[1:], pole_ids], axis=1)
+        tris.append(fan)
+    uv = np.concatenate(extra_uv)
+    vertex = np.concatenate(extra_v)
+    k_extra = len(uv) - len(edge)
+    edge = np.concatenate([edge, np.full(k_extra, -1, np.int64)])
+    param = np.concatenate([param, np.full(k_extra, np.nan)])
+    tris = np.concatenate(tris)
+    used = np.zeros(len(uv), bool)
+    used[tris] = True
+    remap = np.cumsum(used) - 1
+    return uv[used], vertex[used], edge[used], param[used], remap[tris]
