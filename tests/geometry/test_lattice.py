@@ -126,3 +126,22 @@ def test_zip_fills_the_strip_once_counter_clockwise(na, nb, stagger):
     row_segments = {(i, i + 1) for i in range(na - 1)} | {(na + j, na + j + 1) for j in range(nb - 1)}
     assert all(counts[i] == 1 for i, k in enumerate(map(tuple, keys)) if k in row_segments)
     assert row_segments <= set(map(tuple, keys))
+
+
+def test_an_edge_of_a_few_micrometres_is_collapsed_by_topology(monkeypatch):
+    """A prism whose top edge is split by a CAD edge 5 µm long, 300 mm from the origin (float32 steps there are
+    30 µm): its two vertices become one by topology, so the written STL has no triangle float32 rounds flat; without
+    the collapse it has."""
+    import cadquery as cq
+
+    from amprep.geometry.core.checks import float32_degenerate_count
+    from amprep.geometry.meshing import enforce
+
+    pts = [(300, 0), (310, 0), (310, 10), (305.000004, 10), (305, 10.000003), (300, 10.000003)]
+    prism = cq.Workplane().polyline(pts).close().extrude(5).val().wrapped
+    params = MeshParams(tolerance=0.01, mesher="quality")
+    r = mesh_model(model_from_shape(prism), params)
+    _closed_solid(r.mesh)
+    assert float32_degenerate_count(r.mesh) == 0
+    monkeypatch.setattr(enforce, "collapse_short_edges", lambda *a: None)
+    assert float32_degenerate_count(mesh_model(model_from_shape(prism), params).mesh) > 0

@@ -20,6 +20,7 @@ from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
 from amprep.geometry.meshing.face_mesher import (
     boundary_loops,
+    collapse_short_edges,
     discretize_missing_edges,
     grade_edges,
     has_pole,
@@ -31,6 +32,7 @@ from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_trian
 from amprep.geometry.meshing.occt_check import patch_error
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.uv_cdt import MIN_SPACING
 from amprep.geometry.parallel.face_pool import map_faces
 
 ENFORCE_ROUNDS = 4
@@ -107,6 +109,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
     if f.params.quality:
         faces = [f.model.faces[i] for i in remesh]
+        collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
         grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
         planned = plan_lattices(faces, [f.surfaces[i] for i in remesh],  # type: ignore[misc]
                                 [boundary_loops(face, f.topo, target, f.params.angular) for face in faces], f.topo,

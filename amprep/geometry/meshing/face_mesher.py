@@ -96,6 +96,22 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
             topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
 
 
+def collapse_short_edges(faces: list[TopoDS_Face], topo: Topology, shortest: float) -> None:
+    """Identify the two vertices of every edge of `faces` whose discretised length is under `shortest` (a CAD edge of
+    a few µm: kept, its triangles collapse to slivers that a float32 STL makes degenerate), by topology
+    (Topology.merge_vertices, as BRepMesh collapses an edge under its min size): the weld then drops the triangles
+    that collapse with it, on both faces."""
+    for face in faces:
+        for edge in face_edges(face):
+            ei, v1, _, v2, _, degenerate = topo.edge_facts(edge)
+            params = topo.edge_params.get(ei)
+            if degenerate or params is None or v1 == v2:
+                continue
+            if np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1).sum() < shortest:
+                topo.merge_vertices(v1, v2)
+                topo.edge_params[ei] = params[[0, -1]]
+
+
 # ---- the quality mesher's edge grading
 # A triangle with good angles on a segment of length s is about 0.87 s high; a face narrower than that (a chamfer
 # strip, a short cylinder band, a plate's long side) can only hold skinny triangles on it, and Triangle may not
@@ -212,6 +228,9 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             if pcurve is None:
                 raise AmprepError(ErrorCode.MESHING_FAILED, "an edge of face has no curve on its surface")
             v1, p1, v2, p2 = topo.edge_ends(edge)
+            if not degenerate and v1 != v2 and topo.root(v1) == topo.root(v2) and len(params) == 2:
+                wexp.Next()  # an edge collapse_short_edges collapsed: its two ends are one node, the next edge's
+                continue
             n = len(params) - 1  # the last point starts the next edge
             for t in params[:n]:
                 uvs.append(pcurve.Value(t).Coord())
