@@ -103,7 +103,8 @@ def write(rows: list[tuple[str, str, dict]], tol: float, name: str) -> None:
              "[0.4, 0.8) [0.8, 1]. amprep: the default mesher (OCCT BRepMesh, welded by topology, re-meshed where "
              "the chord tolerance is exceeded); amprep quality: `--mesher quality` (every face by our mesher, seed "
              "000's approach: planes by constrained Delaunay to a 30° minimum angle, curved faces from a (u,v) grid "
-             "cut near square on the surface, boundary segments graded to the faces' width); OCCT BRepMesh: the "
+             "cut near square on the surface, large analytic faces bounded by iso-lines as closed-form rows, "
+             "boundary segments graded to the faces' width); OCCT BRepMesh: the "
              "default without the tolerance enforcement. `× amprep`: triangles over the default mesher's. The "
              "paper's rows are for its own test part (not in the corpus), so compare the shape of the distributions "
              "and the means, not the counts.", "",

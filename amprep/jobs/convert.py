@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,6 +52,7 @@ class ConvertResult:
                 "max_chordal_error": m.max_error,
                 "within_tolerance": bool(m.max_error <= m.tolerance * (1 + 1e-9)) if m.max_error == m.max_error else None,
                 "fallback_faces": {str(k): v for k, v in sorted(m.fallback_faces.items()) if v != "quality"},
+                "faces_by_method": dict(sorted(Counter(f.meshed_by for f in m.mesh.faces).items())),
                 "unmeshed_faces": list(m.unmeshed_faces),
                 "estimated_triangles": m.estimated_triangles,
             }

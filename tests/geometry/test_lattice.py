@@ -145,3 +145,20 @@ def test_an_edge_of_a_few_micrometres_is_collapsed_by_topology(monkeypatch):
     assert float32_degenerate_count(r.mesh) == 0
     monkeypatch.setattr(enforce, "collapse_short_edges", lambda *a: None)
     assert float32_degenerate_count(mesh_model(model_from_shape(prism), params).mesh) > 0
+
+
+def test_the_report_counts_faces_by_method(tmp_path):
+    """convert's summary says how each face was meshed: the sphere by the lattice; a box's planes by the quality
+    mesher's Delaunay; the default mesher's by OCCT."""
+    import cadquery as cq
+
+    from amprep.jobs.convert import convert
+
+    for shape, params, expected in (
+            (cq.Solid.makeSphere(12, angleDegrees1=-90, angleDegrees2=90), dict(mesher="quality"), {"lattice": 1}),
+            (cq.Solid.makeBox(10, 20, 30), dict(mesher="quality"), {"quality": 6}),
+            (cq.Solid.makeBox(10, 20, 30), {}, {"occt": 6})):
+        path = tmp_path / "part.step"
+        cq.exporters.export(cq.Workplane().add(shape), str(path))
+        summary = convert(path, MeshParams(tolerance=0.005, **params)).summary()
+        assert summary["meshing"]["faces_by_method"] == expected

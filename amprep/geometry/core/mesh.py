@@ -17,7 +17,9 @@ class FaceInfo:
     id: int
     surface_type: str
     solid: int = 0
-    meshed_by: str = "occt"  # occt | refined (OCCT's, mended where over tolerance) | fallback | stored | stl
+    # occt | refined (OCCT's, mended where over tolerance) | fallback (our Delaunay) | quality (the quality mesher's
+    # Delaunay) | lattice (its closed-form rows) | stored | stl
+    meshed_by: str = "occt"
 
 
 @dataclass(frozen=True, eq=False)

@@ -322,7 +322,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     # CDT triangles are counter-clockwise in (u,v): outward when the surface normal S_u × S_v points out
     flip = winds_inward(face)
     patch = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris, node_vertex, node_edge,
-                      node_param, meshed_by="fallback", error=err)
+                      node_param, meshed_by="quality" if quality else "fallback", error=err)
     if (err > tolerance).any():
         # insertions re-triangulate only around them, except at a pole or apex (there a line of (u,v) is one point
         # and a local re-triangulation leaves tilted triangles in the fan)
@@ -334,7 +334,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
             refined = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris,
                                 np.concatenate([node_vertex, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_edge, np.full(k, -1, np.int64)]),
-                                np.concatenate([node_param, np.full(k, np.nan)]), meshed_by="fallback", error=err)
+                                np.concatenate([node_param, np.full(k, np.nan)]), meshed_by="quality" if quality else "fallback", error=err)
         patch = refined
     if quality and surface.surface_type not in ANALYTIC:  # one scale only approximates the surface's lengths
         patch = flip_for_angles(patch, surface, tolerance, order)
