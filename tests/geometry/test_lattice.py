@@ -162,3 +162,18 @@ def test_the_report_counts_faces_by_method(tmp_path):
         cq.exporters.export(cq.Workplane().add(shape), str(path))
         summary = convert(path, MeshParams(tolerance=0.005, **params)).summary()
         assert summary["meshing"]["faces_by_method"] == expected
+
+
+def test_a_b_spline_face_bounded_by_iso_lines_is_a_sampled_lattice(reference_solids):
+    """A cylinder r10 h30 converted to NURBS (its side a rational B-spline whose (u,v) speed varies along the arc):
+    the side meshed as a lattice from its sampled curvature and its side edges' pcurves inverted, closed, every
+    sampled point within the tolerance of the exact cylinder."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+
+    nurbs = BRepBuilderAPI_NurbsConvert(reference_solids["cylinder"], True).Shape()
+    tol = 0.002
+    r = mesh_model(model_from_shape(nurbs), MeshParams(tolerance=tol, mesher="quality"))
+    assert _lattice_faces(r.mesh) == ["bspline"]
+    _closed_solid(r.mesh)
+    assert r.max_error <= tol
+    assert EXACT_DISTANCE["cylinder"](_sample_triangles(r.mesh)).max() <= tol

@@ -27,7 +27,7 @@ from amprep.geometry.meshing.face_mesher import (
     mesh_face,
     split_edge_to_tolerance,
 )
-from amprep.geometry.meshing.lattice import mesh_lattice, plan_lattices
+from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
 from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
 from amprep.geometry.meshing.occt_check import patch_error
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -70,7 +70,7 @@ class FaceStates:
     fallback: dict[int, str]
     errors: list[np.ndarray] = field(init=False)
     unmeshed: list[int] = field(default_factory=list)
-    lattice: set[int] = field(default_factory=set)  # faces whose rows lattice.plan_lattices set
+    lattice: dict[int, Field] = field(default_factory=dict)  # faces whose rows lattice.plan_lattices set
 
     def __post_init__(self) -> None:
         self.errors = [np.zeros(0)] * len(self.patches)
@@ -114,7 +114,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         planned = plan_lattices(faces, [f.surfaces[i] for i in remesh],  # type: ignore[misc]
                                 [boundary_loops(face, f.topo, target, f.params.angular) for face in faces], f.topo,
                                 target, f.params.angular)
-        f.lattice.update(i for i, p in zip(remesh, planned, strict=True) if p)
+        f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
 
     def remesh_face(i: int) -> FacePatch | None:
         old = f.patches[i]
@@ -125,7 +125,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
             if i in f.lattice:
                 face = f.model.faces[i]
                 lattice = mesh_lattice(i, face, boundary_loops(face, f.topo, target, f.params.angular),
-                                       f.surfaces[i], target, f.params.angular, f.params.check_order)  # type: ignore[arg-type]
+                                       f.surfaces[i], f.lattice[i], target, f.params.check_order)  # type: ignore[arg-type]
                 if lattice is not None:
                     return lattice
             return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]

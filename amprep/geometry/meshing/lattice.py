@@ -16,6 +16,8 @@ from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
+from amprep.geometry.meshing.uv_cdt import _speeds
+from amprep.geometry.meshing.uv_seed import DIFF_STEP, second_form
 
 #: closed_form kinds (cad/surfaces.py) the lattice meshes: cylinder, cone, sphere, torus
 KINDS = (1, 2, 3, 4)
@@ -31,6 +33,15 @@ ASPECT = (0.75, 1.5)
 GROW = 1.6
 #: samples of v where the row spacing is worked out
 SAMPLES = 129
+#: samples per direction of a surface with no closed form (its curvature taken there)
+SAMPLED = 33
+#: a boundary segment up to this much longer than the row's node step beside it is not cut (a cut would double it)
+SPLIT_SLACK = 0.25
+#: the left and right sides' nodes make one row when their v differ by under this × the rows' smallest spacing (two
+#: pcurves inverted apart, _param_of_v)
+ROW_MATCH = 1e-3
+#: samples of a side edge's pcurve where its parameter is found for each row's v
+PCURVE_SAMPLES = 257
 #: a face needing more rows is left to the Delaunay path
 MAX_ROWS = 100_000
 #: a face whose lattice would have fewer triangles is left to the Delaunay path, whose refinement gives small faces
@@ -91,8 +102,8 @@ def rectangle_sides(loop: dict) -> Sides | None:  # type: ignore[type-arg]
 
 
 def _metric(surface: Surface, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(ρ, g, κu, κv) each (n,) at v: the row's radius (the length of S_u), the length of S_v, and the absolute normal
-    curvatures along u and v (the principal ones: these surfaces are of revolution about their axis)."""
+    """(ρ, g, κu, κv) each (n,) at v on a closed-form surface: the row's radius (the length of S_u), the length of
+    S_v, and the absolute normal curvatures along u and v (the principal ones: these surfaces are of revolution)."""
     kind, d = surface.closed_form  # type: ignore[misc]
     a, b = float(d[12]), float(d[13])
     one = np.ones_like(v)
@@ -107,35 +118,81 @@ def _metric(surface: Surface, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     return rho, b * one, np.abs(np.cos(v)) / np.maximum(np.abs(rho), 1e-300), one / b
 
 
-def spacing(surface: Surface, v: np.ndarray, tolerance: float, angular: float) -> tuple[np.ndarray, np.ndarray, bool]:
-    """(b, h) each (n,): the spacing along a row (u) and between rows (v), in mm, at v: b = λh with λ = √(κv/κu)
-    clipped to ASPECT (the largest triangle for the bound) and (κu·b² + κv·h²)/8 = SAFETY × tolerance; neither over
-    the arc of `angular` radians (the edges' angular deflection), b/h kept in ASPECT, neither under the tolerance
-    (near a cone's apex, where κu grows without bound); and True when curvature alone set them (no arc cap) on at
-    least 3/4 of the samples."""
-    _, _, ku, kv = _metric(surface, v)
+def spacing(ku: np.ndarray, kv: np.ndarray, tolerance: float, angular: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(b, h) each (n,): the spacing along a row (u) and between rows (v), in mm, where the curvatures (a bound of
+    them) along u and v are ku, kv: b = λh with λ = √(κv/κu) clipped to ASPECT (the largest triangle for the bound)
+    and (κu·b² + κv·h²)/8 = SAFETY × tolerance; neither over the arc of `angular` radians (the edges' angular
+    deflection), b/h kept in ASPECT, neither under the tolerance (near a cone's apex, where κu grows without bound);
+    and True when curvature alone set them (no arc cap) on at least 3/4 of the samples."""
     with np.errstate(divide="ignore", invalid="ignore"):
         lam = np.where(ku > 0, np.clip(np.sqrt(kv / ku), *ASPECT), ASPECT[1])
-    h = np.sqrt(8 * SAFETY * tolerance / (ku * lam**2 + kv))
+    flat = (ku <= 0) & (kv <= 0)  # a flat patch of a curved face: sized like its curved part's gentlest
+    h = np.sqrt(8 * SAFETY * tolerance / np.where(flat, 1.0, ku * lam**2 + kv))
+    if flat.any():
+        h = np.where(flat, h[~flat].max() if (~flat).any() else np.inf, h)
     b_arc = np.where(ku > 0, angular / np.maximum(ku, 1e-300), np.inf)
     h_arc = np.where(kv > 0, angular / np.maximum(kv, 1e-300), np.inf)
-    by_curvature = bool(np.mean((lam * h > b_arc) | (h > h_arc)) <= 0.25)  # an apex's neighbourhood aside
+    by_curvature = bool(np.mean((lam * h > b_arc) | (h > h_arc)) <= 0.25) and bool(np.isfinite(h).all())
     b = np.minimum(lam * h, b_arc)
     h = np.minimum(np.minimum(h, h_arc), b / ASPECT[0])
     b = np.minimum(b, h * ASPECT[1])
     return np.maximum(b, tolerance), np.maximum(h, tolerance), by_curvature
 
 
-def row_values(surface: Surface, v0: float, v1: float, tolerance: float, angular: float) -> np.ndarray | None:
-    """(N+1,) the rows' v from v0 to v1: equal steps of ∫ g/h dv, the rows' count along the face, N its ceiling; None
-    over MAX_ROWS, or where the edges' angular deflection rather than curvature sets the size (a coarse tolerance on a
-    small radius: there the Delaunay path's grading makes fewer, better triangles)."""
-    vs = np.linspace(v0, v1, SAMPLES)
-    _, g, _, _ = _metric(surface, vs)
-    _, h, by_curvature = spacing(surface, vs, tolerance, angular)
-    if not by_curvature:
+@dataclass(frozen=True)
+class Field:
+    """The steps a lattice takes over a face's (u,v) rectangle, in parameters: `dv` (nv,) between rows at the samples
+    `vs` (nv,) (the smallest over u); `per_u` (nv, nu) a row's nodes per unit of u at (us (nu,), vs), the inverse of
+    their step (0 at a pole); `by_curvature` as spacing's."""
+
+    us: np.ndarray
+    vs: np.ndarray
+    dv: np.ndarray
+    per_u: np.ndarray
+    by_curvature: bool
+
+    def per_u_at(self, v: np.ndarray) -> np.ndarray:
+        """(k, nu) per_u at the rows v (k,), linear between the samples."""
+        j = np.clip(np.searchsorted(self.vs, v) - 1, 0, len(self.vs) - 2)
+        t = np.clip((v - self.vs[j]) / np.maximum(self.vs[j + 1] - self.vs[j], 1e-300), 0, 1)[:, None]
+        return (1 - t) * self.per_u[j] + t * self.per_u[j + 1]
+
+
+def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float) -> Field | None:
+    """The Field of a closed-form surface (exact curvatures, steps uniform along u) or of another surface evaluated in
+    numpy (B-spline, Bézier, swept: |S_u|, |S_v| and the second form sampled on a SAMPLED × SAMPLED grid, the twist
+    |M| added to both curvatures, which bounds the cross term 2M·du·dv); None for one evaluated by OCCT."""
+    if surface.closed_form is not None and surface.closed_form[0] in KINDS:
+        vs = np.linspace(sides.v0, sides.v1, SAMPLES)
+        rho, g, ku, kv = _metric(surface, vs)
+        b, h, ok = spacing(ku, kv, tolerance, angular)
+        per_u = rho / b
+        return Field(np.array([sides.u0, sides.u1]), vs, h / g, np.stack([per_u, per_u], axis=1), ok)
+    if not surface.exact_numpy or surface.closed_form is not None:
         return None
-    f = g / h
+    t = (np.arange(SAMPLED) + 0.5) / SAMPLED
+    us, vs = sides.u0 + (sides.u1 - sides.u0) * t, sides.v0 + (sides.v1 - sides.v0) * t
+    grid = np.stack(np.meshgrid(us, vs), -1).reshape(-1, 2)  # row-major in v
+    box = np.array([[sides.u0, sides.v0], [sides.u1, sides.v1]])
+    su, sv = _speeds(surface, grid, box)
+    L, M, N = second_form(surface, grid, DIFF_STEP * (box[1] - box[0]))
+    if not (np.isfinite(su).all() and np.isfinite(sv).all()):
+        return None
+    su, sv = np.maximum(su, 1e-12), np.maximum(sv, 1e-12)
+    twist = np.abs(M) / (su * sv)
+    b, h, ok = spacing(np.abs(L) / su**2 + twist, np.abs(N) / sv**2 + twist, tolerance, angular)
+    shape = (SAMPLED, SAMPLED)
+    return Field(us, vs, (h / sv).reshape(shape).min(axis=1), (su / b).reshape(shape), ok)
+
+
+def row_values(field: Field, v0: float, v1: float) -> np.ndarray | None:
+    """(N+1,) the rows' v from v0 to v1: equal steps of ∫ dv / field.dv, the rows' count, N its ceiling; None over
+    MAX_ROWS, or where the edges' angular deflection rather than curvature sets the size (a coarse tolerance on a
+    small radius: there the Delaunay path's grading makes fewer, better triangles)."""
+    if not field.by_curvature:
+        return None
+    vs = np.concatenate([[v0], field.vs, [v1]])
+    f = 1 / np.concatenate([field.dv[:1], field.dv, field.dv[-1:]])
     count = np.concatenate([[0.0], np.cumsum((f[1:] + f[:-1]) / 2 * np.diff(vs))])
     if not count[-1] < MAX_ROWS:
         return None
@@ -145,26 +202,37 @@ def row_values(surface: Surface, v0: float, v1: float, tolerance: float, angular
     return rows
 
 
-def expected_triangles(surface: Surface, sides: Sides, rows: np.ndarray, tolerance: float, angular: float) -> float:
-    """2 Σ_k ρ_k·|u1 − u0| / b_k over the rows: about the lattice's triangle count."""
-    rho, _, _, _ = _metric(surface, rows)
-    b, _, _ = spacing(surface, rows, tolerance, angular)
-    return float(2 * np.sum(rho * (sides.u1 - sides.u0) / b))
+def _row_counts(field: Field, u0: float, u1: float, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(us (nu+2,), count (k, nu+2)): each row's cumulative node count ∫ per_u du from u0 along the samples."""
+    us = np.concatenate([[u0], field.us, [u1]])
+    d = field.per_u_at(rows)
+    f = np.concatenate([d[:, :1], d, d[:, -1:]], axis=1)
+    return us, np.concatenate([np.zeros((len(rows), 1)), np.cumsum((f[:, 1:] + f[:, :-1]) / 2 * np.diff(us), axis=1)],
+                              axis=1)
+
+
+def expected_triangles(field: Field, sides: Sides, rows: np.ndarray) -> float:
+    """2 Σ_k (the row's node count) over the rows: about the lattice's triangle count."""
+    return float(2 * _row_counts(field, sides.u0, sides.u1, rows)[1][:, -1].sum())
 
 
 # ---- planning: before any face is meshed, the rows are written into the shared edge discretisation
 def _param_of_v(face: TopoDS_Face, edge, rows: np.ndarray) -> np.ndarray | None:  # type: ignore[no-untyped-def]
-    """(N+1,) parameters of an iso-v-line edge at the rows' v, sorted (its pcurve on the face: v affine in t), or
-    None when v is not affine in t."""
+    """(N+1,) parameters of an iso-u edge at the rows' v, sorted: its pcurve on the face sampled (PCURVE_SAMPLES) and
+    v(t) inverted between the samples (exact where v is affine in t, as on analytic faces); None when v is not
+    monotone along the edge."""
     first, last = BRep_Tool.Range_s(edge)
     pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
     if pc is None:
         return None
-    va, vm, vb = (pc.Value(t).Y() for t in (first, 0.5 * (first + last), last))
-    if abs(vb - va) <= 0 or abs(vm - 0.5 * (va + vb)) > 1e-9 * (1 + abs(vb - va)):
+    ts = np.linspace(first, last, PCURVE_SAMPLES)
+    vs = np.array([pc.Value(float(t)).Y() for t in ts])
+    dv = np.diff(vs)
+    if not ((dv > 0).all() or (dv < 0).all()):
         return None
-    t = first + (rows - va) * (last - first) / (vb - va)
-    t = np.sort(np.clip(t, min(first, last), max(first, last)))
+    if dv[0] < 0:
+        ts, vs = ts[::-1], vs[::-1]
+    t = np.sort(np.interp(rows, vs, ts))
     t[0], t[-1] = min(first, last), max(first, last)
     return t
 
@@ -175,24 +243,23 @@ def _edge_v(face: TopoDS_Face, edge, params: np.ndarray) -> np.ndarray:  # type:
 
 
 def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list[list[dict]], topo: Topology,  # type: ignore[type-arg]
-                  tolerance: float, angular: float) -> list[bool]:
-    """For each face a lattice can mesh (one loop, rectangle_sides, a closed-form surface of KINDS): its left and
-    right side edges discretised at its rows (row_values), or, where an earlier face set one, the face takes those
-    rows when both sides agree; its bottom and top edges' segments split where the row next to them needs it. Returns
-    which faces were planned (only those are meshed by mesh_lattice)."""
+                  tolerance: float, angular: float) -> list[Field | None]:
+    """For each face a lattice can mesh (one loop, rectangle_sides, a field_of its surface, at least LATTICE_MIN
+    triangles): its left and right side edges discretised at its rows (row_values), or, where an earlier face set
+    one, the face takes those rows when both sides agree; its bottom and top edges' segments split to the steps of
+    the row beside them. Returns each face's Field, None where it is not planned (only planned faces are meshed by
+    mesh_lattice)."""
     fixed: set[int] = getattr(topo, "_lattice_edges", set())
-    planned = [False] * len(faces)
+    planned: list[Field | None] = [None] * len(faces)
     for k, (face, surface, lps) in enumerate(zip(faces, surfaces, loops, strict=True)):
-        if (surface is None or surface.closed_form is None or surface.closed_form[0] not in KINDS
-                or len(lps) != 1 or (sides := rectangle_sides(lps[0])) is None):
+        if surface is None or len(lps) != 1 or (sides := rectangle_sides(lps[0])) is None or min(sides.edges[:2]) < 0:
+            continue
+        field = field_of(surface, sides, tolerance, angular)
+        rows = None if field is None else row_values(field, sides.v0, sides.v1)
+        if rows is None or expected_triangles(field, sides, rows) < LATTICE_MIN:  # type: ignore[arg-type]
             continue
         edges = {e: edge for e, edge in ((topo.edge_index(x), x) for x in face_edges(face))}
-        lr = list(sides.edges[:2])
-        if min(lr) < 0:
-            continue
-        rows = row_values(surface, sides.v0, sides.v1, tolerance, angular)
-        if rows is None or expected_triangles(surface, sides, rows, tolerance, angular) < LATTICE_MIN:
-            continue
+        lr = sides.edges[:2]
         given = [_edge_v(face, edges[e], topo.edge_params[e]) for e in lr if e in fixed]
         if given:
             if any(len(g) != len(given[0]) or not np.allclose(g, given[0], rtol=0, atol=1e-9) for g in given):
@@ -204,30 +271,25 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
         for e, p in new.items():
             topo.edge_params[e] = p
             fixed.add(e)
-        _split_ends(face, surface, sides, rows, edges, topo, tolerance, fixed)
-        planned[k] = True
+        for e, v in ((sides.edges[2], rows[0]), (sides.edges[3], rows[-1])):
+            if e >= 0 and e not in fixed and not BRep_Tool.Degenerated_s(edges[e]):
+                _split_to_field(face, edges[e], topo, field, float(v))  # type: ignore[arg-type]
+        planned[k] = field
     topo._lattice_edges = fixed  # type: ignore[attr-defined]
     return planned
 
 
-def _split_ends(face: TopoDS_Face, surface: Surface, sides: Sides, rows: np.ndarray, edges: dict,  # type: ignore[type-arg]
-                topo: Topology, tolerance: float, fixed: set[int]) -> None:
-    """Split the bottom and top edges' segments whose chord, with the first row's height beside it, would make
-    (κu·b² + κv·h²)/8 exceed the tolerance."""
-    for e, v, h in ((sides.edges[2], rows[0], rows[1] - rows[0]), (sides.edges[3], rows[-1], rows[-1] - rows[-2])):
-        rho, g, ku, kv = _metric(surface, np.array([v]))
-        room = 8 * tolerance - kv[0] * (g[0] * h) ** 2
-        if ku[0] <= 0 or room <= 0:
-            continue
-        if e < 0 or e in fixed or BRep_Tool.Degenerated_s(edges[e]):
-            continue
-        params = topo.edge_params[e]
-        pc = BRep_Tool.CurveOnSurface_s(edges[e], face, 0.0, 0.0)
-        u = np.array([pc.Value(float(t)).X() for t in params])
-        parts = np.ceil(np.abs(np.diff(u)) * rho[0] / np.sqrt(room / ku[0])).astype(np.int64)
-        if (parts > 1).any():
-            steps = [params[:-1][i] + np.diff(params)[i] * np.arange(k) / k for i, k in enumerate(parts)]
-            topo.edge_params[e] = np.unique(np.concatenate([*steps, params[-1:]]))
+def _split_to_field(face: TopoDS_Face, edge, topo: Topology, field: Field, v: float) -> None:  # type: ignore[no-untyped-def]
+    """Cut the segments of an iso-v edge (a bottom or top side) longer in u than the field's node step at that row."""
+    ei = topo.edge_index(edge)
+    params = topo.edge_params[ei]
+    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+    u = np.array([pc.Value(float(t)).X() for t in params])
+    density = np.interp((u[:-1] + u[1:]) / 2, field.us, field.per_u_at(np.array([v]))[0])
+    parts = np.maximum(np.ceil(np.abs(np.diff(u)) * density - SPLIT_SLACK), 1).astype(np.int64)
+    if (parts > 1).any():
+        steps = [params[:-1][i] + np.diff(params)[i] * np.arange(k) / k for i, k in enumerate(parts)]
+        topo.edge_params[ei] = np.unique(np.concatenate([*steps, params[-1:]]))
 
 
 # ---- meshing
@@ -258,31 +320,38 @@ def _zip(a: np.ndarray, au: np.ndarray, b: np.ndarray, bu: np.ndarray, pair: np.
     return np.stack([t0, t1, t2], axis=1)
 
 
-def _row_nodes(n: np.ndarray, u0: float, u1: float, stagger: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(row (m,), u (m,)): interior rows' nodes, n[k] segments from u0 to u1, ends excluded; a staggered row's nodes
-    half a step on (its end segments half long)."""
-    counts = np.where(stagger, n, n - 1)
-    row = np.repeat(np.arange(len(n)), counts)
-    j = np.arange(len(row)) - np.repeat(np.cumsum(counts) - counts, counts)
-    step = (u1 - u0) / n[row]
-    return row, u0 + step * (j + np.where(stagger[row], 0.5, 1.0))
+def _row_nodes(field: Field, sides: Sides, rows: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(row (m,), u (m,)): the nodes of the rows (k,) strictly between u0 and u1, n (k,) segments each at equal steps
+    of their cumulative count (_row_counts); every odd row staggered half a step (its end segments half long)."""
+    stagger = np.arange(len(rows)) % 2 == 1
+    us, count = _row_counts(field, sides.u0, sides.u1, rows)
+    per = np.where(stagger, n, n - 1)
+    row = np.repeat(np.arange(len(rows)), per)
+    j = np.arange(len(row)) - np.repeat(np.cumsum(per) - per, per)
+    target = count[row, -1] * (j + np.where(stagger[row], 0.5, 1.0)) / n[row]
+    big = float(count[:, -1].max()) + 1.0  # rows laid end to end: one monotone interpolation for all
+    offset = np.arange(len(rows))[:, None] * big
+    return row, np.interp(target + row * big, (count + offset).ravel(), np.tile(us, len(rows)))
 
 
-def mesh_lattice(face_id: int, face: TopoDS_Face, loops: list[dict], surface: Surface, tolerance: float,  # type: ignore[type-arg]
-                 angular: float, order: int = 6) -> FacePatch | None:
-    """A FacePatch of the face's lattice, measured (and refined locally where a triangle is over the tolerance);
-    None when the face is not one (rectangle_sides, KINDS) or its left and right sides' rows disagree."""
-    if surface.closed_form is None or surface.closed_form[0] not in KINDS or len(loops) != 1:
+def mesh_lattice(face_id: int, face: TopoDS_Face, loops: list[dict], surface: Surface, field: Field,  # type: ignore[type-arg]
+                 tolerance: float, order: int = 6) -> FacePatch | None:
+    """A FacePatch of the face's lattice (its Field from plan_lattices), measured (and refined locally where a triangle
+    is over the tolerance); None when the face is no longer a rectangle or its left and right sides' rows disagree
+    (an edge cut since the plan), or a local refinement cannot be made."""
+    if len(loops) != 1:
         return None
     loop = loops[0]
     sides = rectangle_sides(loop)
     if sides is None or len(sides.left) != len(sides.right) or len(sides.left) < 2:
         return None
     uv_loop = loop["uv"]
-    rows = uv_loop[sides.left, 1]
-    if not np.allclose(rows, uv_loop[sides.right, 1], rtol=0, atol=1e-9 * (1 + np.abs(rows).max())):
+    left, right = uv_loop[sides.left, 1], uv_loop[sides.right, 1]
+    if np.abs(left - right).max() > ROW_MATCH * np.diff(left).min():  # the two sides' nodes make the same rows
         return None
-    built = _lattice_nodes(loop, sides, rows, surface, tolerance, angular)
+    rows = (left + right) / 2
+    rows[0], rows[-1] = sides.v0, sides.v1
+    built = _lattice_nodes(loop, sides, rows, surface, field)
     if built is None:
         return None
     uv, vertex, edge, param, tris = built
@@ -295,22 +364,20 @@ def mesh_lattice(face_id: int, face: TopoDS_Face, loops: list[dict], surface: Su
     return patch
 
 
-def _lattice_nodes(loop: dict, sides: Sides, rows: np.ndarray, surface: Surface, tolerance: float,  # type: ignore[type-arg]
-                   angular: float) -> tuple[np.ndarray, ...] | None:
+def _lattice_nodes(loop: dict, sides: Sides, rows: np.ndarray, surface: Surface,  # type: ignore[type-arg]
+                   field: Field) -> tuple[np.ndarray, ...] | None:
     """(uv (k, 2), vertex, edge, param (k,), tris (t, 3)) of the lattice: the loop's nodes, the interior rows' nodes
     and, at a pole, one node per triangle of its fan (all keyed to the pole's vertex, each at its triangle's u)."""
     uv_loop = loop["uv"]
     nb, nrow = len(uv_loop), len(rows)
-    rho, _, _, _ = _metric(surface, rows)
-    b, _, _ = spacing(surface, rows, tolerance, angular)
     full = surface.periods[0] is not None and abs(sides.u1 - sides.u0 - surface.periods[0]) <= 1e-9
-    n = np.maximum(np.ceil(rho * (sides.u1 - sides.u0) / b - 1e-9).astype(np.int64), 3 if full else 1)
+    n = np.maximum(np.ceil(_row_counts(field, sides.u0, sides.u1, rows)[1][:, -1] - 1e-9).astype(np.int64),
+                   3 if full else 1)
     k = np.arange(nrow)
     for end, side, dist in ((0, sides.bottom, k), (1, sides.top, nrow - 1 - k)):
         if sides.pole[end] < 0:  # a row near a finely cut boundary row is graded towards it
             n = np.maximum(n, np.ceil((len(side) - 1) / GROW ** dist.astype(float)).astype(np.int64))
-    inner = n[1:-1]
-    r_row, r_u = _row_nodes(inner, sides.u0, sides.u1, (np.arange(1, nrow - 1) % 2) == 1)
+    r_row, r_u = _row_nodes(field, sides, rows[1:-1], n[1:-1])
     r_row += 1
     # each row's node ids in u order: left end, interior, right end (the loop's side nodes)
     ids_inner = nb + np.arange(len(r_row))
