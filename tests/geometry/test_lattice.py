@@ -177,3 +177,20 @@ def test_a_b_spline_face_bounded_by_iso_lines_is_a_sampled_lattice(reference_sol
     _closed_solid(r.mesh)
     assert r.max_error <= tol
     assert EXACT_DISTANCE["cylinder"](_sample_triangles(r.mesh)).max() <= tol
+
+
+def test_corpus_b_spline_half_cylinders_are_lattices():
+    """as1's bolts and tubes are rational B-spline half-cylinders, u along the axis and v round the arc, their end
+    arcs circles in space whose parameter is not affine in the surface's v (the pcurve inverted): at 0.01 mm they
+    are lattices, the part closed and within tolerance, with better angles than the Delaunay path's faces."""
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.measure.regularity import regularity
+    from tests.conftest import corpus
+
+    r = mesh_model(read_cad(corpus("as1_assembly_ap214.stp")), MeshParams(tolerance=0.01, mesher="quality"))
+    _closed_solid(r.mesh)
+    assert r.max_error <= 0.01
+    assert _lattice_faces(r.mesh).count("bspline") >= 20
+    q = regularity(r.mesh.corners)["angle"]
+    method = np.array([r.mesh.faces[i].meshed_by for i in r.mesh.face_ids])
+    assert q[method == "lattice"].mean() > 0.8 and q[method == "lattice"].min() > 0.2

@@ -33,8 +33,10 @@ ASPECT = (0.75, 1.5)
 GROW = 1.6
 #: samples of v where the row spacing is worked out
 SAMPLES = 129
-#: samples per direction of a surface with no closed form (its curvature taken there)
+#: samples per direction of a surface with no closed form (its curvature taken there), and a first look's: a face
+#: whose first look expects under half LATTICE_MIN triangles is not sampled further
 SAMPLED = 33
+GLANCE = 5
 #: a boundary segment up to this much longer than the row's node step beside it is not cut (a cut would double it)
 SPLIT_SLACK = 0.25
 #: the left and right sides' nodes make one row when their v differ by under this × the rows' smallest spacing (two
@@ -158,9 +160,9 @@ class Field:
         return (1 - t) * self.per_u[j] + t * self.per_u[j + 1]
 
 
-def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float) -> Field | None:
+def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float, samples: int = 33) -> Field | None:
     """The Field of a closed-form surface (exact curvatures, steps uniform along u) or of another surface evaluated in
-    numpy (B-spline, Bézier, swept: |S_u|, |S_v| and the second form sampled on a SAMPLED × SAMPLED grid, the twist
+    numpy (B-spline, Bézier, swept: |S_u|, |S_v| and the second form sampled on a `samples` × `samples` grid, the twist
     |M| added to both curvatures, which bounds the cross term 2M·du·dv); None for one evaluated by OCCT."""
     if surface.closed_form is not None and surface.closed_form[0] in KINDS:
         vs = np.linspace(sides.v0, sides.v1, SAMPLES)
@@ -170,7 +172,7 @@ def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float) -
         return Field(np.array([sides.u0, sides.u1]), vs, h / g, np.stack([per_u, per_u], axis=1), ok)
     if not surface.exact_numpy or surface.closed_form is not None:
         return None
-    t = (np.arange(SAMPLED) + 0.5) / SAMPLED
+    t = (np.arange(samples) + 0.5) / samples
     us, vs = sides.u0 + (sides.u1 - sides.u0) * t, sides.v0 + (sides.v1 - sides.v0) * t
     grid = np.stack(np.meshgrid(us, vs), -1).reshape(-1, 2)  # row-major in v
     box = np.array([[sides.u0, sides.v0], [sides.u1, sides.v1]])
@@ -181,7 +183,7 @@ def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float) -
     su, sv = np.maximum(su, 1e-12), np.maximum(sv, 1e-12)
     twist = np.abs(M) / (su * sv)
     b, h, ok = spacing(np.abs(L) / su**2 + twist, np.abs(N) / sv**2 + twist, tolerance, angular)
-    shape = (SAMPLED, SAMPLED)
+    shape = (samples, samples)
     return Field(us, vs, (h / sv).reshape(shape).min(axis=1), (su / b).reshape(shape), ok)
 
 
@@ -254,7 +256,12 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
     for k, (face, surface, lps) in enumerate(zip(faces, surfaces, loops, strict=True)):
         if surface is None or len(lps) != 1 or (sides := rectangle_sides(lps[0])) is None or min(sides.edges[:2]) < 0:
             continue
-        field = field_of(surface, sides, tolerance, angular)
+        if surface.closed_form is None:
+            glance = field_of(surface, sides, tolerance, angular, GLANCE)
+            rows = None if glance is None else row_values(glance, sides.v0, sides.v1)
+            if rows is None or expected_triangles(glance, sides, rows) < LATTICE_MIN / 2:  # type: ignore[arg-type]
+                continue
+        field = field_of(surface, sides, tolerance, angular, SAMPLED)
         rows = None if field is None else row_values(field, sides.v0, sides.v1)
         if rows is None or expected_triangles(field, sides, rows) < LATTICE_MIN:  # type: ignore[arg-type]
             continue
