@@ -194,3 +194,29 @@ def test_corpus_b_spline_half_cylinders_are_lattices():
     q = regularity(r.mesh.corners)["angle"]
     method = np.array([r.mesh.faces[i].meshed_by for i in r.mesh.face_ids])
     assert q[method == "lattice"].mean() > 0.8 and q[method == "lattice"].min() > 0.2
+
+
+def test_a_lattice_of_one_strip():
+    """A disc 100 mm across and 0.05 mm thick at 0.001 mm: its band is one strip of over 1,000 triangles (no row
+    between its two circles), zipped directly; closed, within tolerance."""
+    import cadquery as cq
+
+    r = mesh_model(model_from_shape(cq.Solid.makeCylinder(50, 0.05).wrapped),
+                   MeshParams(tolerance=0.001, mesher="quality"))
+    assert _lattice_faces(r.mesh) == ["cylinder"]
+    _closed_solid(r.mesh)
+    assert r.max_error <= 0.001
+
+
+def test_rows_over_the_triangle_limit_are_refused_before_they_are_made(reference_solids):
+    """The sphere at 0.0001 mm would take ~800k lattice triangles: with max_triangles 500k the plan refuses it,
+    output_too_large, before any node is made."""
+    from amprep.errors import AmprepError, ErrorCode
+    from amprep.geometry.meshing import prepare
+
+    import_limit = MeshParams(tolerance=0.0001, mesher="quality", max_triangles=500_000)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(prepare, "QUALITY_ESTIMATE_FACTOR", 0)  # past the B-rep estimate, to the plan's own
+        with pytest.raises(AmprepError) as err:
+            mesh_model(model_from_shape(reference_solids["sphere"]), import_limit)
+    assert err.value.code == ErrorCode.OUTPUT_TOO_LARGE and "rows alone" in str(err.value)

@@ -113,7 +113,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
         planned = plan_lattices(faces, [f.surfaces[i] for i in remesh],  # type: ignore[misc]
                                 [boundary_loops(face, f.topo, target, f.params.angular) for face in faces], f.topo,
-                                target, f.params.angular)
+                                target, f.params.angular, f.params.max_triangles)
         f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
 
     def remesh_face(i: int) -> FacePatch | None:

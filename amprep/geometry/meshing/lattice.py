@@ -11,6 +11,7 @@ import numpy as np
 from OCP.BRep import BRep_Tool
 from OCP.TopoDS import TopoDS_Face
 
+from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
@@ -245,14 +246,15 @@ def _edge_v(face: TopoDS_Face, edge, params: np.ndarray) -> np.ndarray:  # type:
 
 
 def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list[list[dict]], topo: Topology,  # type: ignore[type-arg]
-                  tolerance: float, angular: float) -> list[Field | None]:
+                  tolerance: float, angular: float, max_triangles: int = 10**12) -> list[Field | None]:
     """For each face a lattice can mesh (one loop, rectangle_sides, a field_of its surface, at least LATTICE_MIN
     triangles): its left and right side edges discretised at its rows (row_values), or, where an earlier face set
     one, the face takes those rows when both sides agree; its bottom and top edges' segments split to the steps of
     the row beside them. Returns each face's Field, None where it is not planned (only planned faces are meshed by
-    mesh_lattice)."""
+    mesh_lattice). output_too_large, before any node is made, when the planned lattices would exceed max_triangles."""
     fixed: set[int] = getattr(topo, "_lattice_edges", set())
     planned: list[Field | None] = [None] * len(faces)
+    expected = 0.0
     for k, (face, surface, lps) in enumerate(zip(faces, surfaces, loops, strict=True)):
         if surface is None or len(lps) != 1 or (sides := rectangle_sides(lps[0])) is None or min(sides.edges[:2]) < 0:
             continue
@@ -263,8 +265,14 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
                 continue
         field = field_of(surface, sides, tolerance, angular, SAMPLED)
         rows = None if field is None else row_values(field, sides.v0, sides.v1)
-        if rows is None or expected_triangles(field, sides, rows) < LATTICE_MIN:  # type: ignore[arg-type]
+        n = 0.0 if rows is None else expected_triangles(field, sides, rows)  # type: ignore[arg-type]
+        if n < LATTICE_MIN:
             continue
+        expected += n
+        if expected > max_triangles:
+            raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tolerance:g} mm the quality mesher's rows alone would "
+                              f"make about {expected:,.0f} triangles, over the limit of {max_triangles:,}: use a "
+                              "coarser tolerance, the default mesher or a higher max_triangles")
         edges = {e: edge for e, edge in ((topo.edge_index(x), x) for x in face_edges(face))}
         lr = sides.edges[:2]
         given = [_edge_v(face, edges[e], topo.edge_params[e]) for e in lr if e in fixed]
@@ -330,6 +338,8 @@ def _zip(a: np.ndarray, au: np.ndarray, b: np.ndarray, bu: np.ndarray, pair: np.
 def _row_nodes(field: Field, sides: Sides, rows: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(row (m,), u (m,)): the nodes of the rows (k,) strictly between u0 and u1, n (k,) segments each at equal steps
     of their cumulative count (_row_counts); every odd row staggered half a step (its end segments half long)."""
+    if not len(rows):  # one strip: no row between the two sides
+        return np.zeros(0, np.int64), np.zeros(0)
     stagger = np.arange(len(rows)) % 2 == 1
     us, count = _row_counts(field, sides.u0, sides.u1, rows)
     per = np.where(stagger, n, n - 1)
