@@ -104,7 +104,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     """Mesh the faces of `todo` with a surface again from the shared edge discretisation (seeded with the interior
     points of their old mesh); every edge is discretised first, before faces are meshed apart from each other."""
     target = f.tol * ENFORCE_MARGIN
-    remesh = [i for i in todo if f.surfaces[i] is not None]
+    remesh = sorted(i for i in todo if f.surfaces[i] is not None)  # the lattices plan in face order
     for i in remesh:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
     if f.params.quality:
