@@ -302,14 +302,18 @@ def test_graded_edges_stay_shared_by_both_faces(reference_solids):
     assert lengths.max() < 100 / 4, "the 100 mm edges were not cut for the chamfers beside them"
 
 
-def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated():
-    """The quality mesher can outgrow the estimate made before meshing: the limit is checked on the mesh too."""
+def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated(monkeypatch):
+    """The quality mesher can outgrow the estimate made before meshing: the limit is checked on its planned rows
+    before they are made, and on the mesh as it is made (with no lattice planned)."""
     from amprep.errors import AmprepError, ErrorCode
     from amprep.geometry.cad.estimate import estimate_triangles
+    from amprep.geometry.meshing import lattice
     from amprep.geometry.meshing.prepare import QUALITY_ESTIMATE_FACTOR
 
     model = read_cad(corpus("featuretype_inch_ap214.step"))
     limit = estimate_triangles(model, 0.01, 0.5) * QUALITY_ESTIMATE_FACTOR + 1000  # passes the estimate
-    with pytest.raises(AmprepError) as err:
-        mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=limit))
-    assert err.value.code == ErrorCode.OUTPUT_TOO_LARGE and "grew to" in err.value.message
+    for lattice_min, said in ((lattice.LATTICE_MIN, "rows alone"), (np.inf, "grew to")):
+        monkeypatch.setattr(lattice, "LATTICE_MIN", lattice_min)
+        with pytest.raises(AmprepError) as err:
+            mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=limit))
+        assert err.value.code == ErrorCode.OUTPUT_TOO_LARGE and said in err.value.message
