@@ -311,28 +311,22 @@ def _split_to_field(face: TopoDS_Face, edge, topo: Topology, field: Field, v: fl
 def _zip(a: np.ndarray, au: np.ndarray, b: np.ndarray, bu: np.ndarray, pair: np.ndarray,
          pb: np.ndarray) -> np.ndarray:
     """(m, 3) triangles, counter-clockwise in (u,v), between consecutive rows: a, au (n,) the lower rows' node ids and
-    u, concatenated, `pair` (n,) which pair each belongs to; b, bu, pb the upper rows'. Each pair's segments, merged
-    by their midpoints' u, make one triangle each: a lower segment with the upper node reached, or the reverse."""
-    sa = pair[:-1] == pair[1:]  # segments of the lower rows: consecutive nodes of one pair
-    sb = pb[:-1] == pb[1:]
-    ia, ib = np.flatnonzero(sa), np.flatnonzero(sb)
-    key = np.concatenate([(au[ia] + au[ia + 1]) / 2, (bu[ib] + bu[ib + 1]) / 2])
-    src = np.concatenate([np.zeros(len(ia), np.int8), np.ones(len(ib), np.int8)])
-    grp = np.concatenate([pair[ia], pb[ib]])
-    order = np.lexsort((src, key, grp))
-    s, g = src[order], grp[order]
-    first_a = np.searchsorted(pair, np.arange(g.max() + 1 if len(g) else 0))  # each pair's first node in a, b
-    first_b = np.searchsorted(pb, np.arange(g.max() + 1 if len(g) else 0))
-    cum_a, cum_b = np.cumsum(s == 0), np.cumsum(s == 1)
-    start = np.searchsorted(g, g)  # position of the pair's first item
-    before_a = cum_a - (s == 0) - np.where(start > 0, cum_a[start - 1], 0)
-    before_b = cum_b - (s == 1) - np.where(start > 0, cum_b[start - 1], 0)
-    pa, pbn = first_a[g] + before_a, first_b[g] + before_b
-    lower = s == 0
-    t0 = a[pa]
-    t1 = np.where(lower, a[np.minimum(pa + 1, len(a) - 1)], b[np.minimum(pbn + 1, len(b) - 1)])
-    t2 = b[pbn]
-    return np.stack([t0, t1, t2], axis=1)
+    u, concatenated, `pair` (n,) which pair each belongs to (sorted); b, bu, pb the upper rows'. Each pair's segments,
+    merged by their midpoints' u (a lower one first on a tie), make one triangle each: a lower segment with the
+    upper node reached by then, or an upper segment with the lower node reached. The merge is two searchsorted calls
+    over keys pair·W + u (W wider than every row), so no sort."""
+    ia = np.flatnonzero(pair[:-1] == pair[1:])  # segment starts: consecutive nodes of one pair
+    ib = np.flatnonzero(pb[:-1] == pb[1:])
+    ka, kb = (au[ia] + au[ia + 1]) / 2, (bu[ib] + bu[ib + 1]) / 2
+    lo = min(au.min(initial=0.0), bu.min(initial=0.0))
+    width = max(au.max(initial=0.0), bu.max(initial=0.0)) - lo + 1.0
+    key_a, key_b = pair[ia] * width + (ka - lo), pb[ib] * width + (kb - lo)
+    # the node reached on the other row: its segments before this midpoint, plus one node per earlier pair
+    b_at = np.searchsorted(key_b, key_a, side="left") + pair[ia]
+    a_at = np.searchsorted(key_a, key_b, side="right") + pb[ib]
+    lower = np.stack([a[ia], a[ia + 1], b[b_at]], axis=1)
+    upper = np.stack([a[a_at], b[ib + 1], b[ib]], axis=1)
+    return np.concatenate([lower, upper])
 
 
 def _row_nodes(field: Field, sides: Sides, rows: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
