@@ -98,12 +98,12 @@ def child(tool: str, path: str, tol: float, out: str) -> dict:
     res: dict = {}
     if tool in ("amprep", "amprep-quality"):
         from amprep.geometry.cad.read import read_cad
-        from amprep.geometry.measure.chordal import load_kernels
+        from amprep.geometry.measure.chordal import warm_kernels
         from amprep.geometry.meshing.params import MeshParams
         from amprep.geometry.meshing.pipeline import mesh_model
         from amprep.jobs.convert import convert, write_result
 
-        load_kernels()  # as a worker does once at start-up (workers/celery_app.py), before the clock
+        warm_kernels()  # loaded and dispatched once, as in a worker that has run a job, before the clock
         params = MeshParams(tolerance=tol, mesher="quality" if tool == "amprep-quality" else "occt")
         t = time.perf_counter()
         r = convert(path, params)
@@ -359,8 +359,8 @@ def write_tables(rows: list[dict], name: str = "bench_convert", argv: str = "") 
     table = "\n".join(lines)
     (docs / f"{name}.md").write_text(
         f"# Conversion benchmark\n\nMade by `python bench/convert.py {argv}` (one child process per cell, end to end: "
-        "read → mesh → write STL, amprep's compiled kernels loaded before the clock as a worker loads them at "
-        "start-up; closedness from the written STL with identical-coordinate vertices. `read / mesh s`: for OCCT "
+        "read → mesh → write STL, amprep's compiled kernels loaded and dispatched once before the clock, as in a "
+        "worker that has run a job; closedness from the written STL with identical-coordinate vertices. `read / mesh s`: for OCCT "
         "the seconds of its STEP read and of BRepMesh alone; for amprep of read_cad and of mesh_model alone (edges, "
         "faces, the chordal error of every triangle measured, the weld; not the output checks or the writing), "
         "run once more in the same process; `mesh ×fastest OCCT` compares those meshing seconds. OCCT reads with its own reader and default healing, amprep with one quadratic "
