@@ -56,7 +56,7 @@ def test_reading_and_meshing_in_a_child_gives_the_same_mesh(monkeypatch, name, t
     it is the mesh of reading and meshing here, bit for bit, closed, with the unit and tolerance of the file."""
     params = MeshParams(tolerance=tol, parallel=False)
     here = read_ahead.read_and_prepare(corpus(name), "step", params)
-    monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)  # forks only while the kernels are not loaded
+    monkeypatch.setattr(read_ahead, "kernels_warm", lambda: False)  # the kernels warmed meanwhile, as a first job does
     calls = []
     real = read_ahead.Forked
 
@@ -82,7 +82,7 @@ def test_reading_and_meshing_in_a_child_gives_the_same_mesh(monkeypatch, name, t
 def test_an_unreadable_file_read_in_a_child_is_unreadable_cad(monkeypatch, tmp_path):
     bad = tmp_path / "bad.step"
     bad.write_text("ISO-10303-21;\nHEADER;\nENDSEC;\nDATA;\n#1=FOO(;\nENDSEC;\nEND-ISO-10303-21;\n")
-    monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)
+    monkeypatch.setattr(read_ahead, "kernels_warm", lambda: False)
     with pytest.raises(AmprepError) as exc:
         read_ahead.read_and_prepare_ahead(bad, "step", MeshParams())
     assert exc.value.code in (ErrorCode.UNREADABLE_CAD, ErrorCode.EMPTY_MODEL)
@@ -133,10 +133,10 @@ def test_warming_stops_after_importing_numba_when_the_file_is_read_already(stop,
     import sys
 
     code = (f"import sys; from amprep.geometry.measure import chordal; chordal.warm_kernels(stop=lambda: {stop}); "
-            "print(chordal.kernels_loaded(), 'numba' in sys.modules)")
+            "print(chordal.kernels_loaded(), 'numba' in sys.modules, chordal.kernels_warm())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == [loaded, "True"]
+    assert out.stdout.split() == [loaded, "True", loaded]
 
 
 @needs_fork
@@ -147,7 +147,7 @@ def test_kernels_are_warmed_at_once_for_a_large_file_later_for_a_small_one(monke
 
     assert read_ahead.warm_delay(corpus("nist_ctc02_ap242.stp")) == 0.0
     assert read_ahead.warm_delay(corpus("voron_vhb_din_mount.step")) == read_ahead.WARM_AFTER >= 0.5
-    monkeypatch.setattr(read_ahead, "kernels_loaded", lambda: False)
+    monkeypatch.setattr(read_ahead, "kernels_warm", lambda: False)
     calls = []
     start = time.monotonic()
     monkeypatch.setattr(read_ahead, "warm_kernels", lambda stop: calls.append((time.monotonic() - start, stop())))

@@ -16,6 +16,7 @@ _CHUNK_POINTS = 1_000_000
 #: triangles per call of a compiled kernel (~0.1 s of a B-spline face at order 6 here): checkpoint() between calls
 CALL_TRIANGLES = 100_000
 _kernels = None  # the _chordal_kernel module once loaded
+_warm = False  # warm_kernels ran in this process
 #: numba's start-up (~0.6 s per process) pays for itself from about 100k triangles at order 6 (the kernels run
 #: ~3× numpy's speed on 2 cores): a call this large runs them unless the enclosing computation chose
 #: (core/compiled.py; the mesher chooses for a whole part)
@@ -69,6 +70,13 @@ def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
             for tris, points in ((1, 1), (_kernels.BLOCK + 1, EVAL_BLOCK + 1)):  # serial, then parallel kernels
                 surface.evaluate(np.repeat(uv[0], points, axis=0))
                 triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
+    global _warm
+    _warm = True
+
+
+def kernels_warm() -> bool:
+    """True once warm_kernels has dispatched every kernel in this process (loading them, load_kernels, does not)."""
+    return _warm
 
 
 def worth_compiling(triangles: int, order: int, free_form: int = 0) -> bool:

@@ -17,7 +17,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.instances import find_instancing
 from amprep.geometry.cad.read import model_from_shape, read_cad
 from amprep.geometry.core.progress import ProgressFn
-from amprep.geometry.measure.chordal import kernels_loaded, warm_kernels
+from amprep.geometry.measure.chordal import kernels_warm, warm_kernels
 from amprep.geometry.meshing.brepmesh import occt_pool_untouched
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import Prepared, prepare
@@ -74,8 +74,8 @@ def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams,
                            progress: ProgressFn | None = None) -> Prepared:
     """read_and_prepare in a forked child, wherever the platform forks (a Celery worker too): a file that crashes
     OCCT ends the child, not this process, and is unreadable_cad. Meanwhile this process warms the kernels (when
-    they are not loaded yet and it may use a second core; after warm_delay), then calls progress("reading", 0) every
-    half second, so a cancel or a time limit raised there stops the child at once. OCCT's parallel meshing runs in
+    they are not warm yet, loaded or not, and it may use a second core; after warm_delay), then calls
+    progress("reading", 0) every half second, so a cancel or a time limit raised there stops the child at once. OCCT's parallel meshing runs in
     the child only when this process never started OCCT's thread pool (it gives the same mesh either way)."""
     child_params = replace(params, parallel=params.parallel and occt_pool_untouched())
     job = Forked(_child, str(path), fmt, child_params, isolate=True,
@@ -83,7 +83,7 @@ def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams,
     if not job.forked:
         return read_and_prepare(path, fmt, params)
     try:
-        if not kernels_loaded() and fork_available() and not job.ready(warm_delay(path)):
+        if not kernels_warm() and fork_available() and not job.ready(warm_delay(path)):
             warm_kernels(stop=job.ready)
         while not job.ready(0.5):
             if progress:
