@@ -269,7 +269,8 @@ def test_quality_mesher_closed_and_within_tolerance_checked_independently(refere
 
 
 @pytest.mark.parametrize("name", ["voron_vhb_din_mount.step", "featuretype_inch_ap214.step",
-                                  "as1_assembly_ap214.stp", "voron_hotend_mount_dragon.step"])
+                                  "as1_assembly_ap214.stp", "voron_hotend_mount_dragon.step",
+                                  "sunglasses_lens_inch.igs"])
 def test_quality_mesher_regularity_at_the_papers_tolerance(name):
     """At ε = 0.34 mm (paper 000's Table 2) the quality mesher's mean angle regularity is ≥ 0.6 and above OCCT's,
     with fewer than 0.5 % of its triangles in the paper's first bin [0, 0.005); closed, within tolerance."""
@@ -278,7 +279,8 @@ def test_quality_mesher_regularity_at_the_papers_tolerance(name):
     model = read_cad(corpus(name))
     occt = mesh_model(model, MeshParams(tolerance=0.34))
     ours = mesh_model(model, MeshParams(tolerance=0.34, mesher="quality"))
-    _closed_solid(ours.mesh)
+    if name not in OPEN_CAD:  # the IGES lens is an open surface
+        _closed_solid(ours.mesh)
     assert ours.max_error <= 0.34
     q, q_occt = (summarize(regularity(m.mesh.corners)) for m in (ours, occt))
     assert q.mean["angle"] >= 0.6 and q.mean["angle"] > q_occt.mean["angle"] + 0.1, (q.mean, q_occt.mean)

@@ -135,6 +135,19 @@ def _edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-unt
     return np.array([curve.Value(float(t)).Coord() for t in params]).reshape(-1, 3)
 
 
+def _straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
+    """True when the edge is a straight line in space (whatever its curve type: a STEP may store a line as a B-spline):
+    its points at the ends, the middle and the quarters lie within 1e-6 × its chord of the chord."""
+    t = np.interp([0, 0.25, 0.5, 0.75, 1], [0, 1], [params[0], params[-1]])
+    p = _edge_points(edge, t)
+    chord = p[-1] - p[0]
+    length = float(np.linalg.norm(chord))
+    if length <= 0:
+        return False
+    off = np.cross(p - p[0], chord / length)
+    return bool(np.linalg.norm(off, axis=1).max() <= 1e-6 * length)
+
+
 def face_width(face: TopoDS_Face, topo: Topology) -> float:
     """2A/P of a face: its area (OCCT's surface integral) over half its perimeter (its edges' discretisations)."""
     props = GProp_GProps()
@@ -162,20 +175,20 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
     """Cut the discretised edges of `faces` (surface types `kinds`; their params in topo.edge_params) where a
     segment is longer than GRADE × the narrower width of the faces it bounds, or than GROWTH × its distance from the
     nearer end plus the shortest segment at that end's vertex (over every edge there): a long segment beside a
-    short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends). No size is set
+    short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends;
+    not on a straight edge of a free-form face). No size is set
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
-    free_form: set[int] = set()  # edges of a B-spline or other free-form face: a straight edge can be curved in its
-    # (u,v) there, and its points, cut finer, make ears of three that the face's Delaunay keeps: no growth grading
+    straight: set[int] = set()  # straight edges of a B-spline or other free-form face: a line can be curved in its
+    # (u,v) there, and its points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
     for face, kind in zip(faces, kinds, strict=True):
         w = face_width(face, topo)
-        analytic = kind in ANALYTIC
         for edge in face_edges(face):
             if BRep_Tool.Degenerated_s(edge):
                 continue
             ei = topo.edge_index(edge)
-            if not analytic:
-                free_form.add(ei)
+            if kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei]):
+                straight.add(ei)
             if ei in topo.edge_params and (ei not in cap or GRADE * w < cap[ei][0]):
                 cap[ei] = (GRADE * w, edge)
     for _ in range(2):
@@ -194,7 +207,7 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
             mid = (along[:-1] + along[1:]) / 2
             v1, _, v2, _ = topo.edge_ends(edge)  # type: ignore[arg-type]
             size = np.minimum(at_vertex[v1] + GROWTH * mid, at_vertex[v2] + GROWTH * (along[-1] - mid))
-            if ei in free_form:
+            if ei in straight:
                 size = np.full_like(seg, np.inf)
             if np.isfinite(limit) and limit > 0:
                 size = np.minimum(size, limit)
