@@ -1,7 +1,8 @@
-"""The quality mesher's closed-form lattice for analytic curved faces (cylinder, cone, sphere, torus) whose (u,v)
-domain is a rectangle bounded by iso-lines: rows of constant v, spaced and filled in closed form from the surface's
-principal curvatures so that every triangle keeps the chord tolerance, zipped into triangles row by row, with no
-Delaunay and no refinement rounds (seed 000's grid on curved faces, cut here to the face by its own iso-lines)."""
+"""The quality mesher's lattice for curved faces whose (u,v) domain is a rectangle bounded by iso-lines: rows of
+constant v, spaced and filled from the surface's curvatures (closed forms on cylinders, cones, spheres and tori;
+sampled on B-splines and other surfaces evaluated in numpy) so that every triangle keeps the chord tolerance, zipped
+into triangles row by row, with no Delaunay and no refinement rounds (seed 000's grid on curved faces, cut here to the
+face by its own iso-lines)."""
 
 from __future__ import annotations
 
