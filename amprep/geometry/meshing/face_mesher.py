@@ -162,7 +162,7 @@ def face_width(face: TopoDS_Face, topo: Topology) -> float:
     return 2 * abs(props.Mass()) / perimeter if perimeter > 0 else np.inf
 
 
-def _split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
+def split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
     """Sorted params (n,) with segment i cut into parts[i] (n−1,) equal parameter steps."""
     new = [params[-1:]]
     for k in np.unique(parts):
@@ -214,7 +214,7 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
             size = np.maximum(size, floor)
             parts = np.minimum(np.ceil(seg / np.maximum(size, 1e-12)), MAX_PARTS).astype(np.int64)
             if (parts > 1).any():
-                topo.edge_params[ei] = _split_segments(topo.edge_params[ei], parts)
+                topo.edge_params[ei] = split_segments(topo.edge_params[ei], parts)
 
 
 def has_pole(face: TopoDS_Face) -> bool:
@@ -334,8 +334,9 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     node_vertex, node_edge, node_param = _node_keys(loops, len(pts))
     # CDT triangles are counter-clockwise in (u,v): outward when the surface normal S_u × S_v points out
     flip = winds_inward(face)
+    method = "quality" if quality else "fallback"
     patch = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris, node_vertex, node_edge,
-                      node_param, meshed_by="quality" if quality else "fallback", error=err)
+                      node_param, meshed_by=method, error=err)
     if (err > tolerance).any():
         # insertions re-triangulate only around them, except at a pole or apex (there a line of (u,v) is one point
         # and a local re-triangulation leaves tilted triangles in the fan)
@@ -347,7 +348,7 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
             refined = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris,
                                 np.concatenate([node_vertex, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_edge, np.full(k, -1, np.int64)]),
-                                np.concatenate([node_param, np.full(k, np.nan)]), meshed_by="quality" if quality else "fallback", error=err)
+                                np.concatenate([node_param, np.full(k, np.nan)]), meshed_by=method, error=err)
         patch = refined
     if quality and surface.surface_type not in ANALYTIC:  # one scale only approximates the surface's lengths
         patch = flip_for_angles(patch, surface, tolerance, order)

@@ -16,6 +16,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
+from amprep.geometry.meshing.face_mesher import split_segments
 from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.uv_cdt import _speeds
@@ -304,8 +305,7 @@ def _split_to_field(face: TopoDS_Face, edge, topo: Topology, field: Field, v: fl
     density = np.interp((u[:-1] + u[1:]) / 2, field.us, field.per_u_at(np.array([v]))[0])
     parts = np.maximum(np.ceil(np.abs(np.diff(u)) * density - SPLIT_SLACK), 1).astype(np.int64)
     if (parts > 1).any():
-        steps = [params[:-1][i] + np.diff(params)[i] * np.arange(k) / k for i, k in enumerate(parts)]
-        topo.edge_params[ei] = np.unique(np.concatenate([*steps, params[-1:]]))
+        topo.edge_params[ei] = split_segments(params, parts)
 
 
 # ---- meshing

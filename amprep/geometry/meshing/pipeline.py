@@ -104,7 +104,7 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
     surfaces: list[Surface | None] = [surface_of(f) if BRep_Tool.Surface_s(f) is not None else None
                                       for f in model.faces]  # none: a tessellated-only face (stored triangles)
     use = (_compiled_for(bulk, surfaces, params.check_order) if not params.all_own
-           else worth_compiling(prepared.estimated, params.check_order))  # no first mesh: the estimate decides
+           else worth_compiling(prepared.estimated, params.check_order))  # no first mesh: the part's estimate decides
     if use:
         load_kernels()
     with compiled(use):  # one evaluator for the whole part, whatever is loaded (core/compiled.py)
@@ -139,7 +139,7 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
 
 def _compiled_for(bulk: list, surfaces: list[Surface | None], order: int) -> bool:  # type: ignore[type-arg]
     """True when every face's measure runs the compiled kernels (chordal.worth_compiling of OCCT's first mesh):
-    decided by the part alone (by its estimate, prepare.refuse_too_large, when every face is ours)."""
+    decided by the part alone."""
     tri_count = [len(b[2]) if b is not None else 0 for b in bulk]
     free_form = sum(n for n, sf in zip(tri_count, surfaces, strict=True) if sf is not None and sf.data is not None
                     and sf.surface_type in ("bspline", "bezier"))

@@ -75,8 +75,9 @@ def read_and_prepare_ahead(path: str | Path, fmt: str, params: MeshParams,
     """read_and_prepare in a forked child, wherever the platform forks (a Celery worker too): a file that crashes
     OCCT ends the child, not this process, and is unreadable_cad. Meanwhile this process warms the kernels (when
     they are not warm yet, loaded or not, and it may use a second core; after warm_delay), then calls
-    progress("reading", 0) every half second, so a cancel or a time limit raised there stops the child at once. OCCT's parallel meshing runs in
-    the child only when this process never started OCCT's thread pool (it gives the same mesh either way)."""
+    progress("reading", 0) every half second, so a cancel or a time limit raised there stops the child at once.
+    OCCT's parallel meshing runs in the child only when this process never started OCCT's thread pool (it gives the
+    same mesh either way)."""
     child_params = replace(params, parallel=params.parallel and occt_pool_untouched())
     job = Forked(_child, str(path), fmt, child_params, isolate=True,
                  died=(ErrorCode.UNREADABLE_CAD, f"OCCT crashed reading or meshing the {fmt.upper()} file"))
