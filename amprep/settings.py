@@ -44,6 +44,9 @@ class Settings(BaseSettings):
     soft_time_limit_heavy: int = Field(3600, gt=0, description="Seconds before a refine job is told to stop")
     hard_time_limit_heavy: int = Field(3720, gt=0)
     max_jobs_per_process: int = Field(20, gt=0, description="A worker process is replaced after this many jobs")
+    requeue_after_seconds: int = Field(60, gt=0, description="A queued job whose task is in no queue and held by no "
+                                       "worker this long after it was sent is sent again (a task lost to a broker "
+                                       "restart)")
     max_crashes: int = Field(2, gt=0, description="Worker-process deaths before a job fails with worker_crashed")
     max_triangles: int = Field(20_000_000, gt=0, description="The most triangles any job may output: a job's own "
                                "max_triangles above it is lowered to it")

@@ -2,7 +2,9 @@
 
 Keys (prefix `amprep:`): `job:<id>` a hash per job; `jobs` and `jobs:owner:<owner>` sorted sets by creation
 time (the listing indexes); `events:<id>` a pub/sub channel carrying the job JSON on every change (and `{id, owner, deleted}` when deleted);
-`idem:<owner>:<key>` idempotency keys; `result:<fingerprint>` finished results that may be reused;
+`idem:<owner>:<key>` idempotency keys; `result:<fingerprint>` finished results that may be reused; `unstarted` a sorted
+set of the jobs that have not started, by the time their task was last sent (or the job made: what requeue_lost
+watches);
 `metrics:*` counters for /metrics. Artifacts live in `<data_dir>/jobs/<id>/{input,out}/`.
 """
 
@@ -24,6 +26,7 @@ from redis.backoff import ExponentialBackoff
 from redis.retry import Retry
 
 P = "amprep:"
+UNSTARTED = f"{P}unstarted"
 STATUSES = ("queued", "running", "succeeded", "failed", "cancelled")
 TERMINAL = ("succeeded", "failed", "cancelled")
 #: Upper bounds (seconds) of the job-duration histogram buckets.
@@ -33,8 +36,9 @@ ANONYMOUS = "anonymous"
 MEDIA_TYPES = {".stl": "model/stl", ".3mf": "model/3mf", ".json": "application/json", ".png": "image/png",
                ".npz": "application/octet-stream", ".csv": "text/csv", ".zip": "application/zip"}
 
-# Move a job from one of the allowed states to another, atomically: KEYS[1] job hash; ARGV[1] allowed states
-# (comma separated), ARGV[2] JSON object of fields to set. Returns the old status, or false.
+# Move a job from one of the allowed states to another, atomically: KEYS[1] job hash, KEYS[2] the unstarted set;
+# ARGV[1] allowed states (comma separated), ARGV[2] JSON object of fields to set, ARGV[3] the job id, ARGV[4] '1'
+# to count an attempt too. A job that leaves `queued` leaves the unstarted set. Returns the old status, or false.
 _TRANSITION = """
 local cur = redis.call('HGET', KEYS[1], 'status')
 if not cur then return false end
@@ -43,6 +47,8 @@ for s in string.gmatch(ARGV[1], '[^,]+') do if s == cur then ok = true end end
 if not ok then return false end
 local f = cjson.decode(ARGV[2])
 for k, v in pairs(f) do redis.call('HSET', KEYS[1], k, v) end
+if f['status'] and f['status'] ~= 'queued' then redis.call('ZREM', KEYS[2], ARGV[3]) end
+if ARGV[4] == '1' then redis.call('HINCRBY', KEYS[1], 'attempts', 1) end
 return cur
 """
 
@@ -183,6 +189,8 @@ class JobStore:
         pipe.zadd(f"{P}jobs", {job.id: job.created_at})
         pipe.zadd(f"{P}jobs:owner:{job.owner}", {job.id: job.created_at})
         pipe.hincrby(f"{P}metrics:jobs", f"{job.kind}|{job.status}", 1)
+        if job.status == "queued":
+            pipe.zadd(UNSTARTED, {job.id: job.created_at})
         pipe.execute()
         self.publish(job)
         return job
@@ -193,10 +201,12 @@ class JobStore:
         h = self.redis.hgetall(self.key(job_id))
         return Job.from_redis(h) if h else None
 
-    def transition(self, job_id: str, allowed: Iterable[str], **fields: Any) -> Job | None:
-        """Set `fields` only if the job's status is one of `allowed` (atomic); the new job, or None."""
+    def transition(self, job_id: str, allowed: Iterable[str], attempt: bool = False, **fields: Any) -> Job | None:
+        """Set `fields` (and count an attempt if `attempt`) only if the job's status is one of `allowed` (atomic);
+        the new job, or None."""
         enc = {k: json.dumps(v) if k in Job._JSON or v is None else str(v) for k, v in fields.items()}
-        old = self._transition(keys=[self.key(job_id)], args=[",".join(allowed), json.dumps(enc)])
+        old = self._transition(keys=[self.key(job_id), UNSTARTED],
+                               args=[",".join(allowed), json.dumps(enc), job_id, "1" if attempt else "0"])
         if not old:
             return None
         job = self.get(job_id)
@@ -213,9 +223,6 @@ class JobStore:
 
     def set_progress(self, job_id: str, stage: str, fraction: float) -> Job | None:
         return self.transition(job_id, ("running",), stage=stage, progress=round(float(fraction), 4))
-
-    def add_attempt(self, job_id: str) -> int:
-        return int(self.redis.hincrby(self.key(job_id), "attempts", 1))
 
     def publish(self, job: Job) -> None:
         self.redis.publish(f"{P}events:{job.id}", json.dumps(job.to_dict()))
@@ -252,6 +259,7 @@ class JobStore:
         pipe.delete(self.key(job.id))
         pipe.zrem(f"{P}jobs", job.id)
         pipe.zrem(f"{P}jobs:owner:{job.owner}", job.id)
+        pipe.zrem(UNSTARTED, job.id)
         pipe.publish(self.channel(job.id), json.dumps({"id": job.id, "owner": job.owner, "deleted": True}))
         pipe.execute()
         shutil.rmtree(self.job_dir(job.id), ignore_errors=True)
@@ -277,11 +285,33 @@ class JobStore:
         return bool(self._rebind(keys=[self._idem(owner, key)], args=[stale, job_id, self.retention]))
 
     def mark_sent(self, job_id: str) -> None:
-        """Record that the job's task reached the broker."""
-        self.redis.hset(self.key(job_id), "sent", "1")
+        """Record that the job's task reached the broker (now: requeue_lost counts from here)."""
+        pipe = self.redis.pipeline()
+        pipe.hset(self.key(job_id), "sent", "1")
+        pipe.zadd(UNSTARTED, {job_id: now()})
+        pipe.execute()
 
     def was_sent(self, job_id: str) -> bool:
         return self.redis.hget(self.key(job_id), "sent") == "1"
+
+    def count_sent_again(self) -> None:
+        self.redis.incr(f"{P}metrics:sent-again")
+
+    def sent_again(self) -> int:
+        """Job tasks sent again because the broker lost them (queue.requeue_lost)."""
+        return int(self.redis.get(f"{P}metrics:sent-again") or 0)
+
+    def unstarted(self, older_than: float) -> list[Job]:
+        """Queued jobs made or last sent more than `older_than` seconds ago, oldest first (entries of jobs that
+        started or went meanwhile are dropped)."""
+        out = []
+        for job_id in self.redis.zrangebyscore(UNSTARTED, "-inf", now() - older_than):
+            job = self.get(job_id)
+            if job is None or job.status != "queued":
+                self.redis.zrem(UNSTARTED, job_id)
+            else:
+                out.append(job)
+        return out
 
     def remember_result(self, fp: str, job_id: str) -> None:
         self.redis.set(f"{P}result:{fp}", job_id, ex=self.retention)

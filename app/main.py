@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import time
 from contextlib import asynccontextmanager
 
 import redis.asyncio as aioredis
+from celery import Celery
 from fastapi import FastAPI
 from prometheus_client import CollectorRegistry
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from amprep import __version__
-from amprep.queue import make_celery
+from amprep.queue import make_celery, requeue_lost
 from amprep.settings import Settings, get_settings
 from amprep.store import JobStore
 
@@ -77,6 +80,17 @@ def _openapi(app: FastAPI) -> dict:  # type: ignore[type-arg]
     return app.openapi_schema
 
 
+async def _watch_lost(store: JobStore, celery: Celery, after: float) -> None:
+    """Every after/4 seconds (1 to 15), send again the tasks the broker lost (queue.requeue_lost)."""
+    while True:
+        await asyncio.sleep(min(15.0, max(1.0, after / 4)))
+        try:
+            for job_id in await asyncio.to_thread(requeue_lost, store, celery, after):
+                log.warning("sent again: its task was in no queue and held by no worker", extra={"job_id": job_id})
+        except Exception as exc:  # Redis away (a restart): the next round tries again
+            log.warning("the lost-task watch could not run: %s", type(exc).__name__)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The API on the given settings (default: from the AMPREP_* environment)."""
     s = settings or get_settings()
@@ -92,7 +106,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.registry = CollectorRegistry()
         app.state.registry.register(StoreCollector(app.state.store))
         s.artifacts_dir.mkdir(parents=True, exist_ok=True)
+        watch = asyncio.create_task(_watch_lost(app.state.store, app.state.celery, s.requeue_after_seconds))
         yield
+        watch.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await watch
         await app.state.aredis.aclose()
 
     app = FastAPI(title="amprep", version=__version__, description=DESCRIPTION, lifespan=lifespan, docs_url=None,

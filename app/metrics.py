@@ -12,7 +12,8 @@ from amprep.store import JobStore
 
 
 class StoreCollector(Collector):
-    """amprep_jobs_total{kind,status}, amprep_job_duration_seconds{kind}, amprep_queue_depth{queue}."""
+    """amprep_jobs_total{kind,status}, amprep_job_duration_seconds{kind}, amprep_queue_depth{queue},
+    amprep_tasks_sent_again_total."""
 
     def __init__(self, store: JobStore) -> None:
         self.store = store
@@ -31,3 +32,5 @@ class StoreCollector(Collector):
         for q in ("quick", "heavy", CALLBACK_QUEUE):
             depth.add_metric([q], self.store.queue_depth(q))
         yield depth
+        yield CounterMetricFamily("amprep_tasks_sent_again", "Job tasks the broker lost, sent again",
+                                  value=self.store.sent_again())

@@ -144,15 +144,18 @@ def _submit(c: httpx.Client, part: Path, key: str, times: list[float], lock: thr
 
 
 def _ended(c: httpx.Client, job_id: str, deadline: float) -> dict:  # type: ignore[type-arg]
+    last = None
     while True:
         try:
             r = c.get(f"/v1/jobs/{job_id}")
+            last = r.json() if r.status_code in (200, 202) else last
             if r.status_code == 200 and r.json()["status"] in ("succeeded", "failed", "cancelled"):
                 return r.json()  # type: ignore[no-any-return]
         except httpx.TransportError:
             pass
         if time.monotonic() > deadline:
-            raise TimeoutError(f"job {job_id} did not end")
+            seen = {k: last.get(k) for k in ("status", "stage", "attempts", "worker", "started_at")} if last else None
+            raise TimeoutError(f"job {job_id} did not end; last seen {seen}")
         time.sleep(0.2)
 
 

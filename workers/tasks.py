@@ -83,22 +83,27 @@ class _Reporter:
             raise AmprepError(ErrorCode.CANCELLED, "the job was cancelled")
 
 
-def run_job(job_id: str) -> None:
-    """The body of every kind's task."""
+def run_job(job_id: str, redelivered: bool = False) -> None:
+    """The body of every kind's task. A job starts once: from queued, or again from running only on a message the
+    broker gave back because the process running it died (`redelivered`); any other copy of its message (sent
+    twice: a lost task sent again, a publish retried) ends at once."""
     st, settings = store(), get_settings()
     job_id_var.set(job_id)
     job = st.get(job_id)
     if job is None or job.status not in ("queued", "running"):
-        return  # deleted or cancelled while queued
-    if st.add_attempt(job_id) > settings.max_crashes:
-        log.error("worker process died %d times on this job", settings.max_crashes)
-        _finish(job_id, "failed", error={"code": ErrorCode.WORKER_CRASHED.value, "message":
-                f"the worker process running this job died {settings.max_crashes} times; the input may crash OCCT"})
+        return  # deleted or cancelled while queued, or a copy of an ended job's message
+    if job.status == "running" and not redelivered:
+        log.info("another copy of a running job's task: dropped")
         return
-    job = st.transition(job_id, ("queued", "running"), status="running", started_at=now(), stage="starting",
+    job = st.transition(job_id, (job.status,), attempt=True, status="running", started_at=now(), stage="starting",
                         progress=0.0, worker=f"{socket.gethostname()}:{os.getpid()}",
                         provenance=provenance() | {"params": job.params})
     if job is None:
+        return  # another copy started it first
+    if job.attempts > settings.max_crashes:
+        log.error("worker process died %d times on this job", settings.max_crashes)
+        _finish(job_id, "failed", error={"code": ErrorCode.WORKER_CRASHED.value, "message":
+                f"the worker process running this job died {settings.max_crashes} times; the input may crash OCCT"})
         return
     log.info("started", extra={"kind": job.kind})
     src = st.input_path(job_id, job.input["file"]["stored_as"])
@@ -141,11 +146,11 @@ def run_job(job_id: str) -> None:
 def _job_task(kind: JobKind) -> Task:
     """The kind's task: its name from jobs.params, its body run_job."""
 
-    def job(job_id: str) -> None:
-        run_job(job_id)
+    def job(self: Task, job_id: str) -> None:
+        run_job(job_id, redelivered=bool((self.request.delivery_info or {}).get("redelivered")))
 
     job.__name__ = job.__qualname__ = kind.name
-    return app.task(name=kind.task, base=JobTask)(job)
+    return app.task(name=kind.task, base=JobTask, bind=True)(job)
 
 
 TASKS = {name: _job_task(kind) for name, kind in KINDS.items()}
