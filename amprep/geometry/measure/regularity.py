@@ -17,13 +17,16 @@ def side_lengths(corners: np.ndarray) -> np.ndarray:
 
 
 def min_angles(corners: np.ndarray) -> np.ndarray:
-    """(m,) smallest angle (radians) of each triangle of (m, 3, 3) corners; 0 for one with a zero-length side."""
-    a = np.roll(corners, -1, axis=1) - corners  # angle at corner k between the sides to corners k+1 and k+2
-    b = np.roll(corners, -2, axis=1) - corners
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.einsum("mkd,mkd->mk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
-    angles = np.arccos(np.clip(cos, -1.0, 1.0))
-    return np.where(np.isfinite(angles).all(axis=1), np.where(np.isfinite(angles), angles, 0).min(axis=1), 0.0)
+    """(m,) smallest angle (radians) of each triangle of (m, 3, 3) corners, the one opposite its shortest side, as
+    atan2(|a × b|, a · b) of the two sides at that corner (exact for slivers too); 0 for one with a zero-length side."""
+    c0, c1, c2 = corners[:, 0], corners[:, 1], corners[:, 2]
+    sides = np.stack([c1 - c0, c2 - c1, c0 - c2], axis=1)  # side k runs from corner k to k+1, opposite corner k+2
+    sq = np.einsum("mkd,mkd->mk", sides, sides)
+    k = sq.argmin(axis=1)
+    rows = np.arange(len(corners))
+    a, b = sides[rows, (k + 2) % 3], -sides[rows, (k + 1) % 3]  # from corner k+2 to corners k and k+1
+    angle = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("md,md->m", a, b))
+    return np.where((sq[rows, k] > 0) & np.isfinite(angle), angle, 0.0)
 
 
 def regularity(corners: np.ndarray) -> dict[str, np.ndarray]:

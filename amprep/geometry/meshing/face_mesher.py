@@ -17,7 +17,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
-from amprep.geometry.meshing.local_refine import flip_flat_triangles, flip_for_angles, refine_patch
+from amprep.geometry.meshing.local_refine import flip_flat_triangles, flip_for_angles, refine_patch, smooth_on_surface
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
@@ -285,8 +285,9 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     none does; then flat triangles (area ≤ min_area, or needles) flipped away where a flip keeps the tolerance
     (patch_refine.flip_flat_triangles). With `quality` (the quality mesher) the interior points are cut near square
     on the surface (uv_seed, true_metric) and the triangles refined to a minimum angle where no boundary point is
-    needed (uv_cdt.quality_pslg), in a space whose lengths are the surface's; a face with no single scale to them (a
-    strongly non-uniform B-spline) is meshed as the default mesher meshes it."""
+    needed (uv_cdt.quality_pslg), in a space whose lengths are the surface's; on a face with no single scale to them
+    (a strongly non-uniform B-spline) the cells are judged by the surface's lengths at each, and the mesh is finished
+    by flips and smoothing measured in space (local_refine.smooth_on_surface)."""
     loops = boundary_loops(face, topo, tolerance, angular)
     if not loops:
         raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
@@ -296,19 +297,17 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     pole = has_pole(face)
     # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
     # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
-    quality = quality and (surface.affine or metric_uniform(surface, b_uv))  # one scale to the surface's lengths
-    if curvature_sized and not surface.affine and surface.exact_numpy and not pole:
-        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale, true_metric=quality)
+    seedable = curvature_sized and not surface.affine and surface.exact_numpy and not pole
+    # no single scale to the surface's lengths: cells judged by their own, the mesh finished on the surface
+    local = quality and not surface.affine and not metric_uniform(surface, b_uv)
+    quality = quality and (not local or seedable)
+    if seedable:
+        seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale, true_metric=quality,
+                                 local=local)
         if seeded is not None:
             seeds, scale = seeded
     spacing = min_spacing(tolerance, scale, length_scale)
-    seg, start = [], 0
-    for lp in loops:
-        n = len(lp["uv"])
-        idx = np.arange(start, start + n)
-        seg.append(np.stack([idx, np.roll(idx, -1)], axis=1))
-        start += n
-    segments = np.concatenate(seg)
+    segments = _loop_segments(loops)
     scaled_loops = [lp["uv"] * scale for lp in loops]
     pts = b_uv * scale
     tris = triangulate_pslg(pts, segments)
@@ -318,16 +317,13 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         # no inside test needed: a seed outside the boundary polygon lies in a hole or concavity that Triangle
         # eats; such seeds are dropped after
         pts = np.concatenate([pts, apart(np.unique(seeds * scale, axis=0), pts, spacing)])
-    if quality and (surface.affine or (scale == length_scale).all()):  # angles in this space are the surface's
+    if quality and not local and (surface.affine or (scale == length_scale).all()):  # angles here are the surface's
         pts, tris = quality_pslg(pts, segments, holes)
     else:
         tris = triangulate_pslg(pts, segments, holes)
     used = np.zeros(len(pts), bool)
-    used[:nb] = True
-    used[tris] = True
-    if not used.all():
-        tris = (np.cumsum(used) - 1)[tris]
-        pts = pts[used]
+    used[:nb] = used[tris] = True
+    tris, pts = ((np.cumsum(used) - 1)[tris], pts[used]) if not used.all() else (tris, pts)
     xyz = surface.evaluate(pts / scale)
     err = triangle_chordal_error(xyz[tris], (pts / scale)[tris], surface, order, affine=surface.affine,
                                  stop=tolerance)
@@ -343,16 +339,29 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
         refined = None if pole else refine_patch(patch, err, surface, tolerance, order, scale=scale)
         if refined is None:
             pts, tris, xyz, err = _refine_globally(pts, tris, err, segments, holes, scale, xyz, surface, tolerance,
-                                                   order, spacing, quality)
+                                                   order, spacing, quality and not local)
             k = len(pts) - len(node_vertex)
             refined = FacePatch(face_id, xyz, pts / scale, tris[:, [0, 2, 1]] if flip else tris,
                                 np.concatenate([node_vertex, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_edge, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_param, np.full(k, np.nan)]), meshed_by=method, error=err)
         patch = refined
-    if quality and surface.surface_type not in ANALYTIC:  # one scale only approximates the surface's lengths
+    if quality and local:
+        patch = flip_for_angles(smooth_on_surface(flip_for_angles(patch, surface, tolerance, order), surface,
+                                                  tolerance, order), surface, tolerance, order)
+    elif quality and surface.surface_type not in ANALYTIC:  # one scale only approximates the surface's lengths
         patch = flip_for_angles(patch, surface, tolerance, order)
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
+
+
+def _loop_segments(loops: list[dict]) -> np.ndarray:  # type: ignore[type-arg]
+    """(s, 2) the closed loops' segments as indices into their concatenated nodes."""
+    seg, start = [], 0
+    for lp in loops:
+        idx = np.arange(start, start + len(lp["uv"]))
+        seg.append(np.stack([idx, np.roll(idx, -1)], axis=1))
+        start += len(idx)
+    return np.concatenate(seg)
 
 
 def _node_keys(loops: list[dict], n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[type-arg]

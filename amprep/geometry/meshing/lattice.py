@@ -19,7 +19,7 @@ from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.meshing.face_mesher import split_segments
 from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
-from amprep.geometry.meshing.uv_cdt import _speeds
+from amprep.geometry.meshing.uv_cdt import surface_speeds
 from amprep.geometry.meshing.uv_seed import DIFF_STEP, second_form
 
 #: closed_form kinds (cad/surfaces.py) the lattice meshes: cylinder, cone, sphere, torus
@@ -40,6 +40,10 @@ SAMPLES = 129
 #: whose first look expects under half LATTICE_MIN triangles is not sampled further
 SAMPLED = 33
 GLANCE = 5
+#: a sampled surface is latticed only when the row step its curvature asks for varies by at most this factor along
+#: its rows (the median row; the rows take the smallest step, so a larger spread makes flat triangles where it is
+#: larger): a B-spline cylinder's is 1, a sheet whose parametrisation crowds toward one corner 20
+ROW_SPREAD = 4.0
 #: a boundary segment up to this much longer than the row's node step beside it is not cut (a cut would double it)
 SPLIT_SLACK = 0.25
 #: the left and right sides' nodes make one row when their v differ by under this × the rows' smallest spacing (two
@@ -166,7 +170,8 @@ class Field:
 def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float, samples: int = 33) -> Field | None:
     """The Field of a closed-form surface (exact curvatures, steps uniform along u) or of another surface evaluated in
     numpy (B-spline, Bézier, swept: |S_u|, |S_v| and the second form sampled on a `samples` × `samples` grid, the twist
-    |M| added to both curvatures, which bounds the cross term 2M·du·dv); None for one evaluated by OCCT."""
+    |M| added to both curvatures, which bounds the cross term 2M·du·dv); None for one evaluated by OCCT, or whose
+    row step varies along a row by more than ROW_SPREAD."""
     if surface.closed_form is not None and surface.closed_form[0] in KINDS:
         vs = np.linspace(sides.v0, sides.v1, SAMPLES)
         rho, g, ku, kv = _metric(surface, vs)
@@ -179,7 +184,7 @@ def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float, s
     us, vs = sides.u0 + (sides.u1 - sides.u0) * t, sides.v0 + (sides.v1 - sides.v0) * t
     grid = np.stack(np.meshgrid(us, vs), -1).reshape(-1, 2)  # row-major in v
     box = np.array([[sides.u0, sides.v0], [sides.u1, sides.v1]])
-    su, sv = _speeds(surface, grid, box)
+    su, sv = surface_speeds(surface, grid, box)
     L, M, N = second_form(surface, grid, DIFF_STEP * (box[1] - box[0]))
     if not (np.isfinite(su).all() and np.isfinite(sv).all()):
         return None
@@ -187,7 +192,10 @@ def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float, s
     twist = np.abs(M) / (su * sv)
     b, h, ok = spacing(np.abs(L) / su**2 + twist, np.abs(N) / sv**2 + twist, tolerance, angular)
     shape = (samples, samples)
-    return Field(us, vs, (h / sv).reshape(shape).min(axis=1), (su / b).reshape(shape), ok)
+    dv = (h / sv).reshape(shape)
+    if np.median(dv.max(axis=1) / dv.min(axis=1)) > ROW_SPREAD:  # no one row step fits: flat rows where it is larger
+        return None
+    return Field(us, vs, dv.min(axis=1), (su / b).reshape(shape), ok)
 
 
 def row_values(field: Field, v0: float, v1: float) -> np.ndarray | None:

@@ -1,7 +1,8 @@
 """Bring a meshed face within tolerance by re-triangulating only the neighbourhood of the triangles that exceed it
 (constrained Delaunay in scaled (u,v), new points inserted), keeping the rest of the mesh and every boundary node:
 each round costs what it adds, not the face's size. Mends OCCT's mesh of a face and refines the fallback's; flat
-triangles next to an apex are flipped away."""
+triangles next to an apex are flipped away; the quality mesher's curved faces are finished by flips and smoothing
+measured on the surface."""
 
 from __future__ import annotations
 
@@ -191,6 +192,9 @@ def flip_flat_triangles(patch: FacePatch, surface: Surface, tolerance: float, or
 #: the quality mesher's flips: passes, and the least gain (radians) of the pair's smallest angle that a flip needs
 FLIP_PASSES = 8
 FLIP_GAIN = 1e-3
+#: rounds of smooth_on_surface, and the share of the way to its neighbours' mean a node moves in one
+SMOOTH_ROUNDS = 4
+SMOOTH_RELAX = 0.8
 
 
 def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -213,12 +217,16 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         return patch
     tris, err, xyz, uv = patch.tris.copy(), patch.error.copy(), patch.nodes, patch.uv
     sign = 1.0 if _signed_area2(uv, tris).sum() >= 0 else -1.0
+    angle = min_angles(xyz[tris])
+    active = np.ones(len(tris), bool)  # a pair of triangles neither of which changed has nothing new to offer
     for _ in range(FLIP_PASSES):
         t1, k1, t2, k2 = _shared_sides(tris, len(xyz))
+        look = active[t1] | active[t2]
+        t1, k1, t2, k2 = t1[look], k1[look], t2[look], k2[look]
         a, b, c = tris[t1, k1], tris[t1, (k1 + 1) % 3], tris[t1, (k1 + 2) % 3]
         new1, new2 = np.stack([a, tris[t2, (k2 + 2) % 3], c], axis=1), np.stack([tris[t2, (k2 + 2) % 3], b, c], axis=1)
-        gain = (np.minimum(min_angles(xyz[new1]), min_angles(xyz[new2]))
-                - np.minimum(min_angles(xyz[tris[t1]]), min_angles(xyz[tris[t2]])))
+        angle1, angle2 = min_angles(xyz[new1]), min_angles(xyz[new2])
+        gain = np.minimum(angle1, angle2) - np.minimum(angle[t1], angle[t2])
         ok = np.flatnonzero((gain > FLIP_GAIN) & (sign * _signed_area2(uv, new1) > 0) & (sign * _signed_area2(uv, new2) > 0))
         if not len(ok):
             break
@@ -236,4 +244,94 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         p = pick[keep]
         tris[t1[p]], tris[t2[p]] = new1[p], new2[p]
         err[t1[p]], err[t2[p]] = e[:len(pick)][keep], e[len(pick):][keep]
+        angle[t1[p]], angle[t2[p]] = angle1[p], angle2[p]
+        active[:] = False
+        active[t1[p]] = active[t2[p]] = True
     return replace(patch, tris=tris, error=err)
+
+
+def _node_worst(tri_angle: np.ndarray, by_node: np.ndarray, starts: np.ndarray, n: int) -> np.ndarray:
+    """(n,) the smallest of `tri_angle` (t,) over the triangles around each node: `by_node` sorts the corners
+    tris.ravel() by node, `starts` where each node's run begins (inf for a node in none)."""
+    worst = np.full(n, np.inf)
+    used = np.flatnonzero(np.diff(np.append(starts, len(by_node))) > 0)
+    worst[used] = np.minimum.reduceat(np.repeat(tri_angle, 3)[by_node], starts[used])
+    return worst
+
+
+def _toward_neighbours(patch: FacePatch, surface: Surface, uv: np.ndarray, xyz: np.ndarray, free: np.ndarray,
+                       sides: np.ndarray) -> np.ndarray:
+    """(k, 2) uv with each free node moved SMOOTH_RELAX of the way to the mean of its neighbours in space, the move
+    d (3,) taken into (u,v) by least squares on the tangent plane: [S_u S_v]ᵀ[S_u S_v] δ = [S_u S_v]ᵀ d."""
+    n = len(uv)
+    count = np.bincount(sides.ravel(), minlength=n).astype(float)
+    mean = np.stack([np.bincount(sides[:, 0], xyz[sides[:, 1], j], n) + np.bincount(sides[:, 1], xyz[sides[:, 0], j], n)
+                     for j in range(3)], axis=1) / np.maximum(count, 1)[:, None]
+    idx = np.flatnonzero(free)
+    h = 1e-6 * max(float(np.ptp(patch.uv[:, 0])), float(np.ptp(patch.uv[:, 1])), 1e-12)  # type: ignore[index]
+    su = (surface.evaluate(uv[idx] + [h, 0]) - xyz[idx]) / h
+    sv = (surface.evaluate(uv[idx] + [0, h]) - xyz[idx]) / h
+    d = mean[idx] - xyz[idx]
+    a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+    b1, b2 = (su * d).sum(1), (sv * d).sum(1)
+    det = a11 * a22 - a12 * a12
+    ok = det > 1e-12 * np.maximum(a11 * a22, 1e-300)
+    step = np.where(ok[:, None], np.stack([a22 * b1 - a12 * b2, a11 * b2 - a12 * b1], 1) / np.where(ok, det, 1)[:, None], 0)
+    out = uv.copy()
+    out[idx] = uv[idx] + SMOOTH_RELAX * step
+    return out
+
+
+def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6) -> FacePatch:
+    """The quality mesher's finish of a face with no single scale to its (u,v) lengths: SMOOTH_ROUNDS rounds of
+    interior nodes moved toward their neighbours' mean in space (_toward_neighbours), a move kept only where no
+    triangle turns over in (u,v) and no node's worst angle in space falls; then every triangle measured, and the
+    moved nodes of any over the tolerance put back until none is (the patch as it was if that does not end)."""
+    if patch.uv is None or patch.error is None:
+        return patch
+    tris, uv, xyz = patch.tris, patch.uv.copy(), patch.nodes.copy()
+    free = (patch.node_vertex < 0) & (patch.node_edge < 0)
+    if not free.any():
+        return patch
+    sides = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
+    sign = np.sign(_signed_area2(uv, tris))
+    by_node = np.argsort(tris.ravel(), kind="stable")
+    starts = np.searchsorted(tris.ravel()[by_node], np.arange(len(uv)))
+    angle = min_angles(xyz[tris])
+    for _ in range(SMOOTH_ROUNDS):
+        new = _toward_neighbours(patch, surface, uv, xyz, free, sides)
+        for _ in range(SMOOTH_ROUNDS * 4):  # nodes of triangles turned over go back, until none is
+            over = np.sign(_signed_area2(new, tris)) != sign
+            if not over.any():
+                break
+            back = np.unique(tris[over])
+            new[back] = uv[back]
+        moved = (new != uv).any(axis=1)
+        new_xyz = xyz.copy()
+        new_xyz[moved] = surface.evaluate(new[moved])
+        before = _node_worst(angle, by_node, starts, len(uv))
+        for _ in range(SMOOTH_ROUNDS * 4):  # nodes whose worst angle fell go back, until none did
+            touched = moved[tris].any(axis=1)
+            new_angle = angle.copy()
+            new_angle[touched] = min_angles(new_xyz[tris[touched]])
+            worse = moved & (_node_worst(new_angle, by_node, starts, len(uv)) < before)
+            if not worse.any():
+                break
+            new[worse], new_xyz[worse] = uv[worse], xyz[worse]
+            moved &= ~worse
+        else:
+            new_angle = min_angles(new_xyz[tris])
+        uv, xyz, angle = new, new_xyz, new_angle
+    err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, affine=surface.affine)
+    for _ in range(MAX_ROUNDS):
+        over = err > tolerance
+        if not over.any():
+            return replace(patch, nodes=xyz, uv=uv, error=err)
+        back = np.unique(tris[over])
+        back = back[(uv[back] != patch.uv[back]).any(axis=1)]
+        if not len(back):
+            break
+        uv[back], xyz[back] = patch.uv[back], patch.nodes[back]
+        near = np.isin(tris, back).any(axis=1)
+        err[near] = triangle_chordal_error(xyz[tris[near]], uv[tris[near]], surface, order, affine=surface.affine)
+    return patch

@@ -15,7 +15,7 @@ MAX_ROUNDS = 40
 MIN_SPACING = 0.01
 
 
-def _speeds(surface: Surface, sample: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def surface_speeds(surface: Surface, sample: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(|∂S/∂u|, |∂S/∂v|) each (k,) at sample (k, 2), by forward differences of 1e-6 × the extent of uv (n, 2)."""
     h = 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-9)
     p = surface.evaluate(sample)
@@ -26,7 +26,7 @@ def _speeds(surface: Surface, sample: np.ndarray, uv: np.ndarray) -> tuple[np.nd
 
 def metric_scale(surface: Surface, uv: np.ndarray) -> np.ndarray:
     """(2,) mean |∂S/∂u|, |∂S/∂v| over the boundary points, so that CDT in scaled (u,v) sees near-true lengths."""
-    du, dv = _speeds(surface, uv[:: max(1, len(uv) // 64)], uv)
+    du, dv = surface_speeds(surface, uv[:: max(1, len(uv) // 64)], uv)
     s = np.array([du.mean(), dv.mean()])
     return np.where(s > 1e-12, s, 1.0)
 
@@ -36,7 +36,7 @@ def metric_uniform(surface: Surface, uv: np.ndarray, spread: float = 4.0) -> boo
     and a 5 × 5 grid of its box): one scale then maps (u,v) to the surface's lengths everywhere on it."""
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     g = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5)), -1).reshape(-1, 2) * (hi - lo) + lo
-    du, dv = _speeds(surface, np.concatenate([uv[:: max(1, len(uv) // 32)], g]), uv)
+    du, dv = surface_speeds(surface, np.concatenate([uv[:: max(1, len(uv) // 32)], g]), uv)
     return bool(du.min() > 0 and dv.min() > 0 and du.max() <= spread * du.min() and dv.max() <= spread * dv.min())
 
 

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.meshing.uv_cdt import surface_speeds
 
 #: a cell that needs at most this many parts per direction is cut into them; one that needs more into about
 #: their square root, its children then judged at their own centres
@@ -28,6 +29,10 @@ MAX_ASPECT = 2.0
 QUALITY_ASPECT = 2.0
 #: corners nearer the boundary than this × the cell's shorter side are dropped (no slivers along the boundary)
 KEEP_OFF = 0.25
+#: a face with no single scale (curvature_seeds' `local`): the surface's speeds are taken as at least this × their
+#: median, and its boundary is followed in space through this many pieces per side
+LOCAL_FLOOR = 1 / 16
+LOOP_PARTS = 8
 #: second derivatives by central differences with this step × the face's (u,v) extent
 DIFF_STEP = 1e-4
 
@@ -105,30 +110,39 @@ def size_cells(surface: Surface, b_uv: np.ndarray, target: float) -> tuple[np.nd
     return np.concatenate(leaf_c), np.concatenate(leaf_s)
 
 
-def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
-    """(n,) bool: points (n, 2) farther than KEEP_OFF × shorter (n,) from every boundary polygon (closed, (m, 2)),
-    all in one space; the polygons are sampled at a quarter of the smallest such distance."""
+def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarray], by_segment: bool = False) -> np.ndarray:
+    """(n,) bool: points (n, d) farther than KEEP_OFF × shorter (n,) from every boundary polygon (closed, (m, d)),
+    all in one space, and with `by_segment` farther than KEEP_OFF × the length of the boundary segment nearest them
+    (a point near a long segment would make a sliver with it); the polygons are sampled at a quarter of the
+    smallest such distance."""
     spacing = max(KEEP_OFF * float(shorter.min()) / 2, 1e-12)
-    samples = []
+    samples, lengths = [], []
     for a in loops:
         b = np.roll(a, -1, axis=0)
-        k = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / spacing).astype(np.int64), 1)
+        length = np.linalg.norm(b - a, axis=1)
+        k = np.maximum(np.ceil(length / spacing).astype(np.int64), 1)
         seg, j = _ranks(k)
         t = j / k[seg]
         samples.append(a[seg] + t[:, None] * (b - a)[seg])
+        lengths.append(length[seg])
+    seg_length = np.concatenate(lengths) if by_segment else np.zeros(sum(map(len, lengths)))
     reach = KEEP_OFF * shorter + spacing
     # bounded: a point far inside (most of them) costs a walk through the whole tree otherwise (inf: beyond)
-    distance = cKDTree(np.concatenate(samples)).query(points, distance_upper_bound=float(reach.max()) * 1.01)[0]
-    return distance > reach
+    bound = KEEP_OFF * max(float(shorter.max()), float(seg_length.max())) + spacing
+    distance, nearest = cKDTree(np.concatenate(samples)).query(points, distance_upper_bound=bound * 1.01)
+    near_length = np.where(nearest < len(seg_length), seg_length[np.minimum(nearest, len(seg_length) - 1)], 0.0)
+    return distance > np.maximum(reach, KEEP_OFF * near_length)
 
 
-def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float,
-                    length_scale: np.ndarray, true_metric: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, length_scale: np.ndarray,
+                    true_metric: bool = False, local: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """(points (k, 2) interior (u,v) seeds, scale (2,) of the (u,v) space to triangulate them in) for a face with
     boundary loops (closed (u,v) polygons (m, 2)), chords within `target`; `length_scale` (2,): metric_scale's
     (u,v) → mm. With `true_metric` (the quality mesher) the cells are cut near square in mm and triangulated in mm,
     for triangles near-right-angled on the surface rather than in a stretched space (more of them on a face
-    curved one way, as a cylinder). None when the face needs more cells than MAX_CELLS or its box is degenerate."""
+    curved one way, as a cylinder); with `local` too, each cell is judged square by the surface's own |S_u|, |S_v|
+    at its centre (a face with no single scale to its lengths). None when the face needs more cells than MAX_CELLS
+    or its box is degenerate."""
     b_uv = np.concatenate(loops)
     if (np.ptp(b_uv, axis=0) * length_scale <= 1e-9).any():
         return None
@@ -139,16 +153,39 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float,
     typical = np.median(sizes * length_scale, axis=0)
     ratio = 1.0 if true_metric else np.sqrt(typical[1] / typical[0])
     scale = length_scale * np.array([ratio, 1 / ratio])
-    side = sizes * scale
+    speeds = _local_speeds(surface, centers, b_uv) if local else scale
     aspect = QUALITY_ASPECT if true_metric else MAX_ASPECT
-    ku = np.maximum(np.ceil(side[:, 0] / (aspect * side[:, 1]) - SLACK), 1).astype(np.int64)
-    kv = np.maximum(np.ceil(side[:, 1] / (aspect * side[:, 0]) - SLACK), 1).astype(np.int64)
+    side = sizes * speeds
+    ku = np.clip(np.ceil(side[:, 0] / (aspect * side[:, 1]) - SLACK), 1, MAX_CELLS).astype(np.int64)
+    kv = np.clip(np.ceil(side[:, 1] / (aspect * side[:, 0]) - SLACK), 1, MAX_CELLS).astype(np.int64)
+    if (ku * kv).sum() > MAX_CELLS:
+        return None
+    if local:
+        speeds = np.repeat(speeds, ku * kv, axis=0)
     centers, sizes = split_cells(centers, sizes, ku, kv)
     corners = (centers[:, None] + _CORNERS[None] * sizes[:, None]).reshape(-1, 2)
-    shorter = np.repeat((sizes * scale).min(axis=1), 4)
+    shorter = np.repeat((sizes * speeds).min(axis=1), 4)
     lo, span = b_uv.min(axis=0), np.maximum(np.ptp(b_uv, axis=0), 1e-12)
     key = np.round((corners - lo) / span * 2**30).astype(np.int64)  # cells share corners: one point each
     _, first = np.unique(key[:, 0] * (2**31 + 1) + key[:, 1], return_index=True)
     corners, shorter = corners[first], shorter[first]
-    keep = _off_boundary(corners * scale, shorter, [lp * scale for lp in loops])
+    if local:  # how near the boundary a corner is: in space, as no one scale of (u,v) tells
+        keep = _off_boundary(surface.evaluate(corners), shorter, [surface.evaluate(lp) for lp in _dense(loops, surface)],
+                             by_segment=True)
+    else:
+        keep = _off_boundary(corners * scale, shorter, [lp * scale for lp in loops])
     return corners[keep], scale
+
+
+def _local_speeds(surface: Surface, centers: np.ndarray, b_uv: np.ndarray) -> np.ndarray:
+    """(n, 2) |S_u|, |S_v| at the cells' centers (n, 2), each at least LOCAL_FLOOR × its median (where a
+    parametrisation degenerates along a side, |S_u| → 0 would cut its cells without end)."""
+    speeds = np.stack(surface_speeds(surface, centers, b_uv), axis=1)
+    return np.maximum(speeds, LOCAL_FLOOR * np.median(speeds, axis=0))
+
+
+def _dense(loops: list[np.ndarray], surface: Surface) -> list[np.ndarray]:
+    """The loops (closed (u,v) polygons (m, 2)) with each side cut into LOOP_PARTS pieces, so that its image on the
+    surface, not straight in space, is followed."""
+    t = np.arange(LOOP_PARTS) / LOOP_PARTS
+    return [(lp[:, None] + t[None, :, None] * (np.roll(lp, -1, axis=0) - lp)[:, None]).reshape(-1, 2) for lp in loops]
