@@ -128,6 +128,8 @@ ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
 GROWTH = 1.0
 #: and is cut into at most this many parts (a sliver face's width can be near zero)
 MAX_PARTS = 64
+#: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
+UV_STRAIGHT = 1e-6
 
 
 def _edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -146,6 +148,22 @@ def _straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
         return False
     off = np.cross(p - p[0], chord / length)
     return bool(np.linalg.norm(off, axis=1).max() <= 1e-6 * length)
+
+
+def _curved_in_uv(edge, face: TopoDS_Face, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
+    """True when the edge's pcurve on the face is not a straight line in (u,v): its points at the ends, the middle and
+    the quarters farther than UV_STRAIGHT × its (u,v) chord from that chord (True where it has no pcurve)."""
+    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+    if pc is None:
+        return True
+    t = np.interp([0, 0.25, 0.5, 0.75, 1], [0, 1], [params[0], params[-1]])
+    uv = np.array([[q.X(), q.Y()] for q in (pc.Value(float(x)) for x in t)])
+    chord = uv[-1] - uv[0]
+    length = float(np.linalg.norm(chord))
+    if length <= 0:
+        return True
+    off = (uv[:, 0] - uv[0, 0]) * chord[1] - (uv[:, 1] - uv[0, 1]) * chord[0]
+    return bool(np.abs(off).max() > UV_STRAIGHT * length * length)
 
 
 def face_width(face: TopoDS_Face, topo: Topology) -> float:
@@ -179,15 +197,16 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
     not on a straight edge of a free-form face). No size is set
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
-    straight: set[int] = set()  # straight edges of a B-spline or other free-form face: a line can be curved in its
-    # (u,v) there, and its points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
+    straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face: their
+    # points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
     for face, kind in zip(faces, kinds, strict=True):
         w = face_width(face, topo)
         for edge in face_edges(face):
             if BRep_Tool.Degenerated_s(edge):
                 continue
             ei = topo.edge_index(edge)
-            if kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei]):
+            if (kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei])
+                    and _curved_in_uv(edge, face, topo.edge_params[ei])):
                 straight.add(ei)
             if ei in topo.edge_params and (ei not in cap or GRADE * w < cap[ei][0]):
                 cap[ei] = (GRADE * w, edge)
