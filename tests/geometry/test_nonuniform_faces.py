@@ -12,7 +12,7 @@ from OCP.Approx import Approx_IsoParametric
 from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
 from OCP.GeomAbs import GeomAbs_C2
 from OCP.GeomAPI import GeomAPI_PointsToBSplineSurface
-from OCP.gp import gp_Pnt
+from OCP.gp import gp_Pnt, gp_Vec
 from OCP.TColgp import TColgp_Array2OfPnt
 
 from amprep.geometry.cad.read import model_from_shape
@@ -23,7 +23,8 @@ from amprep.geometry.meshing.pipeline import mesh_model
 from amprep.geometry.meshing.uv_cdt import metric_uniform
 from tests.geometry.test_independent_distance import _worst_distance
 
-SHEETS = {  # x(s), y(t) of the fitted points at uniform parameters s, t in [0, 1]
+SHEETS = {  # x(s), y(t) of the fitted points at uniform parameters s, t in [0, 1]; the second one's fit overshoots:
+    # x(u) < 0 by 1 µm just off u = 0, so its own normal turns over along that side
     "crowded": (lambda s: 100 * (0.1 * s + 0.9 * s**3), lambda t: 60 * (0.2 * t + 0.8 * t**2)),
     "degenerate side": (lambda s: 100 * s**2.5, lambda t: 60 * t**2),  # |S_u| = 0 along u = 0, |S_v| along v = 0
 }
@@ -49,13 +50,41 @@ def test_regular_and_within_tolerance_where_no_single_scale_fits(name, tol):
     assert not metric_uniform(surface_of(face), uv)  # the case forced: one scale does not fit
     model = model_from_shape(face)
     r = mesh_model(model, MeshParams(tolerance=tol, mesher="quality"))
-    q = summarize(regularity(r.mesh.corners))
-    assert q.mean["angle"] >= 0.6, q.mean
+    default = mesh_model(model, MeshParams(tolerance=tol))
+    q, q_default = (summarize(regularity(m.mesh.corners)) for m in (r, default))
+    assert q.mean["angle"] >= max(0.58, q_default.mean["angle"] + 0.05), (q.mean, q_default.mean)
     assert q.bins["angle"][0] < 0.005 * r.mesh.n_triangles
     assert r.max_error <= tol
     assert _worst_distance(model, r.mesh, samples=150) <= tol * 1.001
-    default = mesh_model(model, MeshParams(tolerance=tol))
     assert r.mesh.n_triangles <= 5 * default.mesh.n_triangles
+    if name == "crowded":  # the degenerate sheet's fitted surface itself folds back (x < 0 by 1 µm near u = 0)
+        assert _folded(model, r.mesh) == 0
+
+
+def _folded(model, mesh) -> int:  # type: ignore[no-untyped-def]
+    """Sampled triangles whose normal points against the face's surface normal S_u × S_v at their centroid's
+    projection, where that normal is defined (|S_u × S_v| over 1 % of its median: not at a degenerate side)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+    from OCP.GeomAPI import GeomAPI_ProjectPointOnSurf
+    from OCP.TopAbs import TopAbs_REVERSED
+
+    face = model.faces[0]
+    surface = BRep_Tool.Surface_s(face)
+    c = mesh.corners
+    normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    found = []
+    for k in range(0, len(c), max(1, len(c) // 400)):
+        proj = GeomAPI_ProjectPointOnSurf(gp_Pnt(*map(float, c[k].mean(axis=0))), surface)
+        u, v = proj.LowerDistanceParameters()
+        d1u, d1v, p = gp_Vec(), gp_Vec(), gp_Pnt()
+        BRepAdaptor_Surface(face).D1(u, v, p, d1u, d1v)
+        n = np.cross([d1u.X(), d1u.Y(), d1u.Z()], [d1v.X(), d1v.Y(), d1v.Z()])
+        if face.Orientation() == TopAbs_REVERSED:
+            n = -n
+        found.append((np.linalg.norm(n), np.dot(n, normal[k]) < 0))
+    size, against = np.array(found).T
+    return int((against.astype(bool) & (size > 0.01 * np.median(size))).sum())
 
 
 def test_the_lattice_refuses_rows_that_cannot_take_one_step():

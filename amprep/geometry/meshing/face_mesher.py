@@ -197,16 +197,16 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
     not on a straight edge of a free-form face). No size is set
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
-    straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face: their
-    # points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
+    straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face, or of one
+    # with a pole: their points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
     for face, kind in zip(faces, kinds, strict=True):
-        w = face_width(face, topo)
+        w, pole = face_width(face, topo), has_pole(face)
         for edge in face_edges(face):
             if BRep_Tool.Degenerated_s(edge):
                 continue
             ei = topo.edge_index(edge)
             if (kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei])
-                    and _curved_in_uv(edge, face, topo.edge_params[ei])):
+                    and (pole or _curved_in_uv(edge, face, topo.edge_params[ei]))):
                 straight.add(ei)
             if ei in topo.edge_params and (ei not in cap or GRADE * w < cap[ei][0]):
                 cap[ei] = (GRADE * w, edge)

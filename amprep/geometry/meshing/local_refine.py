@@ -195,6 +195,8 @@ FLIP_GAIN = 1e-3
 #: rounds of smooth_on_surface, and the share of the way to its neighbours' mean a node moves in one
 SMOOTH_ROUNDS = 4
 SMOOTH_RELAX = 0.8
+#: and at most this many sets of nodes that share no side, each moved at once, per round
+SMOOTH_SETS = 64
 
 
 def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -250,88 +252,81 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
     return replace(patch, tris=tris, error=err)
 
 
-def _node_worst(tri_angle: np.ndarray, by_node: np.ndarray, starts: np.ndarray, n: int) -> np.ndarray:
-    """(n,) the smallest of `tri_angle` (t,) over the triangles around each node: `by_node` sorts the corners
-    tris.ravel() by node, `starts` where each node's run begins (inf for a node in none)."""
-    worst = np.full(n, np.inf)
-    used = np.flatnonzero(np.diff(np.append(starts, len(by_node))) > 0)
-    worst[used] = np.minimum.reduceat(np.repeat(tri_angle, 3)[by_node], starts[used])
-    return worst
-
-
-def _toward_neighbours(patch: FacePatch, surface: Surface, uv: np.ndarray, xyz: np.ndarray, free: np.ndarray,
-                       sides: np.ndarray) -> np.ndarray:
-    """(k, 2) uv with each free node moved SMOOTH_RELAX of the way to the mean of its neighbours in space, the move
-    d (3,) taken into (u,v) by least squares on the tangent plane: [S_u S_v]ᵀ[S_u S_v] δ = [S_u S_v]ᵀ d."""
+def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: np.ndarray, sides: np.ndarray,
+                       h: float) -> np.ndarray:
+    """(k, 2) the (u,v) of nodes idx (k,) moved SMOOTH_RELAX of the way to the mean of their neighbours in space (sides
+    (e, 2)), the move d (3,) taken into (u,v) by least squares on the tangent plane: J δ = d with J = [S_u S_v]
+    (differences of step h); a node where J is singular stays."""
     n = len(uv)
-    count = np.bincount(sides.ravel(), minlength=n).astype(float)
-    mean = np.stack([np.bincount(sides[:, 0], xyz[sides[:, 1], j], n) + np.bincount(sides[:, 1], xyz[sides[:, 0], j], n)
-                     for j in range(3)], axis=1) / np.maximum(count, 1)[:, None]
-    idx = np.flatnonzero(free)
-    h = 1e-6 * max(float(np.ptp(patch.uv[:, 0])), float(np.ptp(patch.uv[:, 1])), 1e-12)  # type: ignore[index]
+    count = np.bincount(sides.ravel(), minlength=n).astype(float)[idx]
+    total = np.stack([np.bincount(sides[:, 0], xyz[sides[:, 1], j], n) + np.bincount(sides[:, 1], xyz[sides[:, 0], j], n)
+                      for j in range(3)], axis=1)[idx]
     su = (surface.evaluate(uv[idx] + [h, 0]) - xyz[idx]) / h
     sv = (surface.evaluate(uv[idx] + [0, h]) - xyz[idx]) / h
-    d = mean[idx] - xyz[idx]
+    d = total / np.maximum(count, 1)[:, None] - xyz[idx]
     a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
     b1, b2 = (su * d).sum(1), (sv * d).sum(1)
     det = a11 * a22 - a12 * a12
     ok = det > 1e-12 * np.maximum(a11 * a22, 1e-300)
-    step = np.where(ok[:, None], np.stack([a22 * b1 - a12 * b2, a11 * b2 - a12 * b1], 1) / np.where(ok, det, 1)[:, None], 0)
-    out = uv.copy()
-    out[idx] = uv[idx] + SMOOTH_RELAX * step
-    return out
+    step = np.stack([a22 * b1 - a12 * b2, a11 * b2 - a12 * b1], 1) / np.where(ok, det, 1)[:, None]
+    return uv[idx] + SMOOTH_RELAX * np.where(ok[:, None], step, 0.0)
+
+
+def _independent(candidates: np.ndarray, sides: np.ndarray, priority: np.ndarray) -> np.ndarray:
+    """(n,) bool: the candidates (n,) of lower `priority` than every candidate neighbour along sides (e, 2): no two of
+    them share a side, so no triangle holds two."""
+    a, b = sides[:, 0], sides[:, 1]
+    both = candidates[a] & candidates[b]
+    blocked = np.zeros(len(candidates), bool)
+    blocked[a[both & (priority[b] < priority[a])]] = True
+    blocked[b[both & (priority[a] < priority[b])]] = True
+    return candidates & ~blocked
 
 
 def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6) -> FacePatch:
-    """The quality mesher's finish of a face with no single scale to its (u,v) lengths: SMOOTH_ROUNDS rounds of
-    interior nodes moved toward their neighbours' mean in space (_toward_neighbours), a move kept only where no
-    triangle turns over in (u,v) and no node's worst angle in space falls; then every triangle measured, and the
-    moved nodes of any over the tolerance put back until none is (the patch as it was if that does not end)."""
+    """The quality mesher's finish of a face with no single scale to its (u,v) lengths: SMOOTH_ROUNDS rounds in which
+    every interior node, in sets no two of which share a side (_independent), is moved toward its neighbours' mean
+    in space (_toward_neighbours); a move is kept only where none of the node's triangles turns over in (u,v) or goes
+    over the tolerance and their smallest angle in space does not fall. Each node's triangles hold no other moving
+    node, so every decision is exact and final: no fold is made and every triangle stays within the tolerance."""
     if patch.uv is None or patch.error is None:
         return patch
-    tris, uv, xyz = patch.tris, patch.uv.copy(), patch.nodes.copy()
+    tris, uv, xyz, err = patch.tris, patch.uv.copy(), patch.nodes.copy(), patch.error.copy()
     free = (patch.node_vertex < 0) & (patch.node_edge < 0)
     if not free.any():
         return patch
+    n = len(uv)
     sides = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
     sign = np.sign(_signed_area2(uv, tris))
-    by_node = np.argsort(tris.ravel(), kind="stable")
-    starts = np.searchsorted(tris.ravel()[by_node], np.arange(len(uv)))
     angle = min_angles(xyz[tris])
+    priority = (np.arange(n, dtype=np.uint64) * np.uint64(2654435761)) % np.uint64(2**32)  # a fixed scatter
+    h = 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-12)
     for _ in range(SMOOTH_ROUNDS):
-        new = _toward_neighbours(patch, surface, uv, xyz, free, sides)
-        for _ in range(SMOOTH_ROUNDS * 4):  # nodes of triangles turned over go back, until none is
-            over = np.sign(_signed_area2(new, tris)) != sign
-            if not over.any():
+        candidates = free.copy()
+        for _ in range(SMOOTH_SETS):
+            movers = _independent(candidates, sides, priority)
+            if not movers.any():
                 break
-            back = np.unique(tris[over])
-            new[back] = uv[back]
-        moved = (new != uv).any(axis=1)
-        new_xyz = xyz.copy()
-        new_xyz[moved] = surface.evaluate(new[moved])
-        before = _node_worst(angle, by_node, starts, len(uv))
-        for _ in range(SMOOTH_ROUNDS * 4):  # nodes whose worst angle fell go back, until none did
-            touched = moved[tris].any(axis=1)
-            new_angle = angle.copy()
-            new_angle[touched] = min_angles(new_xyz[tris[touched]])
-            worse = moved & (_node_worst(new_angle, by_node, starts, len(uv)) < before)
-            if not worse.any():
-                break
-            new[worse], new_xyz[worse] = uv[worse], xyz[worse]
-            moved &= ~worse
-        else:
-            new_angle = min_angles(new_xyz[tris])
-        uv, xyz, angle = new, new_xyz, new_angle
-    err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, affine=surface.affine)
-    for _ in range(MAX_ROUNDS):
-        over = err > tolerance
-        if not over.any():
-            return replace(patch, nodes=xyz, uv=uv, error=err)
-        back = np.unique(tris[over])
-        back = back[(uv[back] != patch.uv[back]).any(axis=1)]
-        if not len(back):
-            break
-        uv[back], xyz[back] = patch.uv[back], patch.nodes[back]
-        near = np.isin(tris, back).any(axis=1)
-        err[near] = triangle_chordal_error(xyz[tris[near]], uv[tris[near]], surface, order, affine=surface.affine)
-    return patch
+            candidates &= ~movers
+            idx = np.flatnonzero(movers)
+            trial_uv, trial_xyz = uv.copy(), xyz.copy()
+            trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, sides, h)
+            trial_xyz[idx] = surface.evaluate(trial_uv[idx])
+            star = np.flatnonzero(movers[tris].any(axis=1))
+            t = tris[star]
+            owner = t[np.arange(len(t)), movers[t].argmax(axis=1)]  # the one moving node of each
+            new_angle = min_angles(trial_xyz[t])
+            old_min, new_min = np.full(n, np.inf), np.full(n, np.inf)
+            np.minimum.at(old_min, owner, angle[star])
+            np.minimum.at(new_min, owner, new_angle)
+            keep = movers & (new_min >= old_min)
+            keep[owner[np.sign(_signed_area2(trial_uv, t)) != sign[star]]] = False
+            new_err = err[star].copy()  # measured only where the move may still be kept
+            check = np.flatnonzero(keep[owner])
+            new_err[check] = triangle_chordal_error(trial_xyz[t[check]], trial_uv[t[check]], surface, order,
+                                                    affine=surface.affine)
+            keep[owner[new_err > tolerance]] = False
+            uv[keep], xyz[keep] = trial_uv[keep], trial_xyz[keep]
+            took = keep[owner]
+            angle[star[took]], err[star[took]] = new_angle[took], new_err[took]
+    return replace(patch, nodes=xyz, uv=uv, error=err)
