@@ -12,7 +12,7 @@ import numpy as np
 
 from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.core.edges import edge_codes
+from amprep.geometry.core.edges import edge_codes, edge_incidence
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.measure.regularity import min_angles
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -24,6 +24,7 @@ from amprep.geometry.meshing.uv_cdt import (
     metric_scale,
     min_spacing,
     recall_errors,
+    surface_tangents,
     triangle_codes,
     triangulate_pslg,
 )
@@ -253,16 +254,15 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
 
 
 def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: np.ndarray, sides: np.ndarray,
-                       h: float) -> np.ndarray:
+                       extent: np.ndarray) -> np.ndarray:
     """(k, 2) the (u,v) of nodes idx (k,) moved SMOOTH_RELAX of the way to the mean of their neighbours in space (sides
     (e, 2)), the move d (3,) taken into (u,v) by least squares on the tangent plane: J δ = d with J = [S_u S_v]
-    (differences of step h); a node where J is singular stays."""
+    (uv_cdt.surface_tangents, steps from the (u,v) `extent` (m, 2)); a node where J is singular stays."""
     n = len(uv)
     count = np.bincount(sides.ravel(), minlength=n).astype(float)[idx]
     total = np.stack([np.bincount(sides[:, 0], xyz[sides[:, 1], j], n) + np.bincount(sides[:, 1], xyz[sides[:, 0], j], n)
                       for j in range(3)], axis=1)[idx]
-    su = (surface.evaluate(uv[idx] + [h, 0]) - xyz[idx]) / h
-    sv = (surface.evaluate(uv[idx] + [0, h]) - xyz[idx]) / h
+    su, sv = surface_tangents(surface, uv[idx], xyz[idx], extent)
     d = total / np.maximum(count, 1)[:, None] - xyz[idx]
     a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
     b1, b2 = (su * d).sum(1), (sv * d).sum(1)
@@ -296,11 +296,10 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
     if not free.any():
         return patch
     n = len(uv)
-    sides = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
+    sides = edge_incidence(tris).edges
     sign = np.sign(_signed_area2(uv, tris))
     angle = min_angles(xyz[tris])
     priority = (np.arange(n, dtype=np.uint64) * np.uint64(2654435761)) % np.uint64(2**32)  # a fixed scatter
-    h = 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-12)
     for _ in range(SMOOTH_ROUNDS):
         candidates = free.copy()
         for _ in range(SMOOTH_SETS):
@@ -310,7 +309,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
             candidates &= ~movers
             idx = np.flatnonzero(movers)
             trial_uv, trial_xyz = uv.copy(), xyz.copy()
-            trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, sides, h)
+            trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, sides, patch.uv)
             trial_xyz[idx] = surface.evaluate(trial_uv[idx])
             star = np.flatnonzero(movers[tris].any(axis=1))
             t = tris[star]

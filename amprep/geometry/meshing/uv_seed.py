@@ -170,7 +170,7 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
     _, first = np.unique(key[:, 0] * (2**31 + 1) + key[:, 1], return_index=True)
     corners, shorter = corners[first], shorter[first]
     if local:  # how near the boundary a corner is: in space, as no one scale of (u,v) tells
-        keep = _off_boundary(surface.evaluate(corners), shorter, [surface.evaluate(lp) for lp in _dense(loops, surface)],
+        keep = _off_boundary(surface.evaluate(corners), shorter, [surface.evaluate(lp) for lp in _dense(loops)],
                              by_segment=True)
     else:
         keep = _off_boundary(corners * scale, shorter, [lp * scale for lp in loops])
@@ -184,7 +184,7 @@ def _local_speeds(surface: Surface, centers: np.ndarray, b_uv: np.ndarray) -> np
     return np.maximum(speeds, LOCAL_FLOOR * np.median(speeds, axis=0))
 
 
-def _dense(loops: list[np.ndarray], surface: Surface) -> list[np.ndarray]:
+def _dense(loops: list[np.ndarray]) -> list[np.ndarray]:
     """The loops (closed (u,v) polygons (m, 2)) with each side cut into LOOP_PARTS pieces, so that its image on the
     surface, not straight in space, is followed."""
     t = np.arange(LOOP_PARTS) / LOOP_PARTS
