@@ -33,6 +33,7 @@ from amprep.geometry.meshing.uv_cdt import (
     triangulate_pslg,
 )
 from amprep.geometry.meshing.uv_seed import curvature_seeds
+from amprep.geometry.meshing.weld import pole_folds
 
 
 def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
@@ -297,6 +298,19 @@ def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
 def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
               angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0,
               curvature_sized: bool = True, quality: bool = False) -> FacePatch:
+    """_mesh_face; a face with a pole whose quality mesh folds there (weld.pole_folds: its interior points, near the
+    pole's line in (u,v), joined to two of its nodes that are one point) is meshed again as before the quality
+    mesher, from its boundary and refinement alone."""
+    patch = _mesh_face(face_id, face, topo, surface, tolerance, angular, order, seeds, min_area, curvature_sized,
+                       quality)
+    if quality and patch.meshed_by == "quality" and has_pole(face) and pole_folds(patch):
+        patch = _mesh_face(face_id, face, topo, surface, tolerance, angular, order, seeds, min_area, False, False)
+    return patch
+
+
+def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
+               angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0,
+               curvature_sized: bool = True, quality: bool = False) -> FacePatch:
     """A FacePatch for one face: CDT of its boundary loops in scaled (u,v) plus interior points (when
     `curvature_sized`, on a curved surface with a numpy evaluator and no pole, uv_seed.curvature_seeds' points in
     their stretched space; else `seeds` (k, 2) interior (u,v) points, e.g. an earlier mesh's), points inserted
@@ -316,9 +330,9 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     pole = has_pole(face)
     # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
     # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
-    seedable = curvature_sized and not surface.affine and surface.exact_numpy and not pole
+    seedable = curvature_sized and not surface.affine and surface.exact_numpy and (quality or not pole)
     # no single scale to the surface's lengths: cells judged by their own, the mesh finished on the surface
-    local = quality and not surface.affine and not metric_uniform(surface, b_uv)
+    local = quality and not surface.affine and (pole or not metric_uniform(surface, b_uv))
     quality = quality and (not local or seedable)
     if seedable:
         seeded = curvature_seeds(surface, [lp["uv"] for lp in loops], tolerance, length_scale, true_metric=quality,

@@ -16,7 +16,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
-from amprep.geometry.meshing.face_mesher import split_segments
+from amprep.geometry.meshing.face_mesher import has_pole, split_segments
 from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.uv_cdt import surface_speeds
@@ -276,7 +276,7 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
         field = field_of(surface, sides, tolerance, angular, SAMPLED)
         rows = None if field is None else row_values(field, sides.v0, sides.v1)
         n = 0.0 if rows is None else expected_triangles(field, sides, rows)  # type: ignore[arg-type]
-        if n < LATTICE_MIN:
+        if rows is None or (n < LATTICE_MIN and not (surface.closed_form is not None and has_pole(face))):
             continue
         expected += n
         if expected > max_triangles:

@@ -110,22 +110,26 @@ def size_cells(surface: Surface, b_uv: np.ndarray, target: float) -> tuple[np.nd
     return np.concatenate(leaf_c), np.concatenate(leaf_s)
 
 
-def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarray], by_segment: bool = False) -> np.ndarray:
+def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarray], by_segment: bool = False,
+                  pieces: int = 1) -> np.ndarray:
     """(n,) bool: points (n, d) farther than KEEP_OFF × shorter (n,) from every boundary polygon (closed, (m, d)),
     all in one space, and with `by_segment` farther than KEEP_OFF × the length of the boundary segment nearest them
-    (a point near a long segment would make a sliver with it); the polygons are sampled at a quarter of the
-    smallest such distance."""
+    (a point near a long segment would make a sliver with it; `pieces`: each boundary segment was given as this many;
+    a run of zero-length segments, a pole, takes the longer of the segments either side of it); the polygons are
+    sampled at a quarter of the smallest such distance."""
     spacing = max(KEEP_OFF * float(shorter.min()) / 2, 1e-12)
     samples, lengths = [], []
     for a in loops:
         b = np.roll(a, -1, axis=0)
         length = np.linalg.norm(b - a, axis=1)
+        if by_segment:
+            length = _through_points(length)
         k = np.maximum(np.ceil(length / spacing).astype(np.int64), 1)
         seg, j = _ranks(k)
         t = j / k[seg]
         samples.append(a[seg] + t[:, None] * (b - a)[seg])
         lengths.append(length[seg])
-    seg_length = np.concatenate(lengths) if by_segment else np.zeros(sum(map(len, lengths)))
+    seg_length = np.concatenate(lengths) * pieces if by_segment else np.zeros(sum(map(len, lengths)))
     reach = KEEP_OFF * shorter + spacing
     # bounded: a point far inside (most of them) costs a walk through the whole tree otherwise (inf: beyond)
     bound = KEEP_OFF * max(float(shorter.max()), float(seg_length.max())) + spacing
@@ -171,10 +175,24 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
     corners, shorter = corners[first], shorter[first]
     if local:  # how near the boundary a corner is: in space, as no one scale of (u,v) tells
         keep = _off_boundary(surface.evaluate(corners), shorter, [surface.evaluate(lp) for lp in _dense(loops)],
-                             by_segment=True)
+                             by_segment=True, pieces=LOOP_PARTS)
     else:
         keep = _off_boundary(corners * scale, shorter, [lp * scale for lp in loops])
     return corners[keep], scale
+
+
+def _through_points(length: np.ndarray) -> np.ndarray:
+    """(m,) a closed polygon's side lengths with each run of zeros (sides that are one point in space: a pole) set to
+    the longer of the nonzero sides before and after it."""
+    nonzero = length > 0
+    if nonzero.all() or not nonzero.any():
+        return length
+    idx = np.arange(len(length))
+    last = np.maximum.accumulate(np.where(nonzero, idx, -1))
+    before = np.where(last >= 0, length[np.maximum(last, 0)], length[np.flatnonzero(nonzero)[-1]])
+    nxt = np.minimum.accumulate(np.where(nonzero, idx, len(length))[::-1])[::-1]
+    after = np.where(nxt < len(length), length[np.minimum(nxt, len(length) - 1)], length[np.flatnonzero(nonzero)[0]])
+    return np.where(nonzero, length, np.maximum(before, after))
 
 
 def _local_speeds(surface: Surface, centers: np.ndarray, b_uv: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from amprep.geometry.meshing.occt_read import FacePatch
 
 def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np.ndarray | None = None) -> Mesh:
     """One Mesh from per-face patches; triangles that collapse onto one vertex (poles, apexes, edges the mesher
-    collapsed) are dropped. vertex_roots (n_brep_vertices,) maps B-rep vertices identified by collapsed edges."""
+    collapsed) are dropped, and so are folded pairs (folded_pairs: two of a face's triangles that a pole made one). vertex_roots (n_brep_vertices,) maps B-rep vertices identified by collapsed edges."""
     if not patches:
         return Mesh.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), np.int64)).with_arrays(faces=faces)
     nodes = np.concatenate([p.nodes for p in patches])
@@ -57,6 +57,7 @@ def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np
         p.uv[p.tris] if p.uv is not None else np.full((len(p.tris), 3, 2), np.nan) for p in patches
     ])
     keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
+    keep[keep] = ~folded_pairs(tris[keep], face_ids[keep])
     tris, face_ids, uv = tris[keep], face_ids[keep], uv[keep]
     used = np.flatnonzero(np.bincount(tris.reshape(-1), minlength=len(first)))
     remap = np.full(len(first), -1, np.int64)
@@ -67,6 +68,38 @@ def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np
         vertex_dim=dim[src], vertex_entity=entity[src].astype(np.int32),
         vertex_param=np.where(dim[src] == ON_BREP_EDGE, param[src], np.nan), faces=faces,
     )
+
+
+def folded_pairs(tris: np.ndarray, face_ids: np.ndarray) -> np.ndarray:
+    """(t,) bool: triangles (t, 3) of a pair in one face (face_ids (t,)) on the same three vertices, wound opposite ways:
+    a fin of zero volume, made where a face's (u,v) triangles on either side of a line meet at a pole (two pole
+    nodes, one vertex); dropping both leaves each of its sides with the uses it had without the fin."""
+    if len(tris) < 2:
+        return np.zeros(len(tris), bool)
+    key = np.sort(tris, axis=1)
+    odd = ((tris[:, 0] > tris[:, 1]).astype(np.int8) + (tris[:, 0] > tris[:, 2]) + (tris[:, 1] > tris[:, 2])) % 2
+    rows = np.concatenate([key, face_ids[:, None].astype(np.int64)], axis=1)
+    _, inv, count = np.unique(rows, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    pair = count[inv] == 2
+    odd_in_group = np.bincount(inv, weights=odd, minlength=len(count))
+    return pair & (odd_in_group[inv] == 1)
+
+
+def pole_folds(patch: FacePatch) -> bool:
+    """True when a face's triangles, its nodes on one B-rep vertex made one (a pole), fold: a side used by more than
+    two of them, or a folded pair (folded_pairs) that the weld would have to drop."""
+    key = np.where(patch.node_vertex >= 0, patch.node_vertex, patch.node_vertex.max(initial=0) + 1
+                   + np.arange(len(patch.node_vertex)))
+    tris = key[patch.tris]
+    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])]
+    if len(tris) == 0:
+        return False
+    from amprep.geometry.core.edges import edge_incidence
+
+    _, tris = np.unique(tris, return_inverse=True)
+    tris = tris.reshape(-1, 3)
+    return bool(edge_incidence(tris).count.max() > 2 or folded_pairs(tris, np.zeros(len(tris), np.int64)).any())
 
 
 def orient_stored_shells(mesh: Mesh) -> Mesh:
