@@ -58,10 +58,14 @@ def _occt_read(path: str):
 def _mesh_checks(stl: str) -> dict:
     from amprep.geometry.core.checks import check_mesh
     from amprep.geometry.io.stl import read_stl
+    from amprep.geometry.measure.regularity import regularity
 
-    c = check_mesh(read_stl(stl))
+    mesh = read_stl(stl)
+    c = check_mesh(mesh)
+    angle = regularity(mesh.corners)["angle"] if mesh.n_triangles else None
     return dict(triangles=c.triangles, boundary=c.boundary_edges, nonmanifold=c.nonmanifold_edges,
-                degenerate=c.degenerate_triangles, closed=c.closed)
+                degenerate=c.degenerate_triangles, closed=c.closed,
+                angle_regularity=None if angle is None else float(angle.mean()))
 
 
 def _occt_deviation(shape, tol: float) -> float:

@@ -6,6 +6,7 @@ is, within the tolerance; and the triangles and seconds beside OCCT's.
 
     python bench/real_parts.py                          # freecad-common at 0.1 and 0.01 mm
     python bench/real_parts.py --package freecad-common --tolerances 0.1,0.01,0.001
+    python bench/real_parts.py --tools amprep,amprep-quality,occt-delabella --name bench_real_parts_quality
 
 Downloads the package with `apt-get download` (no install) and writes docs/bench_real_parts.md and .csv.
 """
@@ -62,6 +63,8 @@ def main() -> None:
     ap.add_argument("--tolerances", default="0.1,0.01")
     ap.add_argument("--timeout", type=float, default=300)
     ap.add_argument("--name", default="bench_real_parts")
+    ap.add_argument("--tools", default="amprep,occt-delabella", help="amprep, amprep-quality, occt-delabella (the "
+                    "reference every other tool is set beside)")
     ap.add_argument("--from-log", help="write the tables from the JSON lines a run printed (e.g. one stopped early)")
     args = ap.parse_args()
     if args.from_log:
@@ -74,7 +77,7 @@ def main() -> None:
     for part in parts:
         label = str(part.relative_to(tmp)).replace("tree/usr/share/", "")
         for tol in (float(t) for t in args.tolerances.split(",")):
-            for tool in ("amprep", "occt-delabella"):
+            for tool in args.tools.split(","):
                 res = run_one(tool, part, tol, args.timeout)
                 row = {"part": label, "tolerance": tol, "tool": tool, **res}
                 rows.append(row)
@@ -83,62 +86,73 @@ def main() -> None:
 
 
 def _summary(rows: list[dict], tool: str) -> dict:
-    """Counts over one tool's cells: converted, closed, within tolerance (max dev / tol ≤ 1), errors."""
+    """Counts over one tool's cells: converted, closed, within tolerance (max dev / tol ≤ 1), errors, and the median
+    of the written STLs' mean angle regularity."""
     mine = [r for r in rows if r["tool"] == tool]
     done = [r for r in mine if "seconds" in r]
+    angle = sorted(r["angle_regularity"] for r in done if r.get("angle_regularity") is not None)
     return {"cells": len(mine), "converted": len(done), "closed": sum(bool(r.get("closed")) for r in done),
             "within": sum((r.get("deviation_ratio") or 0) <= 1 for r in done),
+            "angle": f"{angle[len(angle) // 2]:.2f}" if angle else "",
             "errors": sorted({r.get("error", "") for r in mine if "seconds" not in r})}
+
+
+REFERENCE = "occt-delabella"
 
 
 def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, complete: bool = True) -> None:
     docs = ROOT / "docs"
     fields = ["part", "tolerance", "tool", "seconds", "triangles", "closed", "boundary", "nonmanifold", "degenerate",
-              "deviation_ratio", "peak_rss_mb", "error"]
+              "deviation_ratio", "angle_regularity", "peak_rss_mb", "error"]
     with open(docs / f"{args.name}.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
+    tools = list(dict.fromkeys(r["tool"] for r in rows))
     cells: dict[tuple[str, float], dict[str, dict]] = {}
     for r in rows:
         cells.setdefault((r["part"], r["tolerance"]), {})[r["tool"]] = r
-    both = [(k, c) for k, c in cells.items() if all("seconds" in c.get(t, {}) for t in ("amprep", "occt-delabella"))]
-    closed_by_us_only = sum(bool(c["amprep"]["closed"]) and not c["occt-delabella"]["closed"] for _, c in both)
-    open_for_us = [(k, c) for k, c in both if not c["amprep"]["closed"]]
-    ratio = sorted(c["amprep"]["triangles"] / c["occt-delabella"]["triangles"] for _, c in both
-                   if c["occt-delabella"]["triangles"])
     lines = [f"# Real parts outside the corpus: {args.package}", "",
-             f"Made by `python bench/real_parts.py --package {args.package} --tolerances {args.tolerances}`: every STEP, "
-             f"IGES and BREP file the Debian package ships and the B-rep of each FreeCAD document in it, each once by "
-             f"content ({n_parts} parts{'' if complete else ', those a run stopped early had reached, from its log'}), converted end to end in a child process per cell by amprep and by the bare "
-             "OCCT pipeline (its reader, BRepMesh Delabella, StlAPI_Writer). `closed`: every edge of the written STL "
-             "shared by two triangles, consistently oriented; `within`: worst sampled chordal error ≤ the tolerance.",
-             "", "| tool | cells | converted | closed | within tolerance | errors |", "|---|---|---|---|---|---|"]
-    for tool in ("amprep", "occt-delabella"):
+             f"Made by `python bench/real_parts.py --package {args.package} --tolerances {args.tolerances}"
+             f"{'' if args.tools == 'amprep,occt-delabella' else f' --tools {args.tools} --name {args.name}'}`: every "
+             f"STEP, IGES and BREP file the Debian package ships and the B-rep of each FreeCAD document in it, each once "
+             f"by content ({n_parts} parts{'' if complete else ', those a run stopped early had reached, from its log'}), "
+             "converted end to end in a child process per cell by amprep (`amprep-quality`: `--mesher quality`) and by "
+             "the bare OCCT pipeline (its reader, BRepMesh Delabella, StlAPI_Writer). `closed`: every edge of the "
+             "written STL shared by two triangles, consistently oriented; `within`: worst sampled chordal error ≤ the "
+             "tolerance; `angle`: the written STL's mean angle regularity (α_min / 60°), its median over the cells.",
+             "", "| tool | cells | converted | closed | within tolerance | median angle regularity | errors |",
+             "|---|---|---|---|---|---|---|"]
+    for tool in tools:
         s = _summary(rows, tool)
-        lines.append(f"| {tool} | {s['cells']} | {s['converted']} | {s['closed']} | {s['within']} | "
+        lines.append(f"| {tool} | {s['cells']} | {s['converted']} | {s['closed']} | {s['within']} | {s['angle']} | "
                      f"{', '.join(e for e in s['errors'] if e) or '—'} |")
-    if ratio:
-        lines += ["", f"Cells closed by amprep and open from OCCT: {closed_by_us_only} of {len(both)}. "
-                  f"Triangles amprep / OCCT: median {ratio[len(ratio) // 2]:.2f}, range {ratio[0]:.2f}–{ratio[-1]:.2f} "
-                  "(more where OCCT left faces unmeshed, fewer where it over-refines)."]
-    if open_for_us:
-        lines += ["", "Open from amprep (`amprep convert` says why in its notes: surfaces that stay open once sewn, or faces it could not mesh):", ""]
-        lines += [f"- {k[0]} at {k[1]:g} mm: {c['amprep']['boundary']} boundary edges "
-                  f"(OCCT: {c['occt-delabella']['boundary']} boundary, {c['occt-delabella']['nonmanifold']} non-manifold)"
-                  for k, c in open_for_us]
+    for tool in (t for t in tools if t != REFERENCE):
+        both = [(k, c) for k, c in cells.items() if all("seconds" in c.get(t, {}) for t in (tool, REFERENCE))]
+        closed_only = sum(bool(c[tool]["closed"]) and not c[REFERENCE]["closed"] for _, c in both)
+        ratio = sorted(c[tool]["triangles"] / c[REFERENCE]["triangles"] for _, c in both if c[REFERENCE]["triangles"])
+        if ratio:
+            lines += ["", f"`{tool}`: cells closed by it and open from OCCT: {closed_only} of {len(both)}. Triangles "
+                      f"{tool} / OCCT: median {ratio[len(ratio) // 2]:.2f}, range {ratio[0]:.2f}–{ratio[-1]:.2f}."]
+        open_for_us = [(k, c) for k, c in both if not c[tool]["closed"]]
+        if open_for_us:
+            lines += ["", f"Open from `{tool}` (`amprep convert` says why in its notes: surfaces that stay open once "
+                      "sewn, or faces it could not mesh):", ""]
+            lines += [f"- {k[0]} at {k[1]:g} mm: {c[tool]['boundary']} boundary edges "
+                      f"(OCCT: {c[REFERENCE]['boundary']} boundary, {c[REFERENCE]['nonmanifold']} non-manifold)"
+                      for k, c in open_for_us]
     lines += ["", "| part | tol mm | tool | s | triangles | closed | boundary | non-manifold | degenerate | "
-              "max dev / tol |", "|" + "---|" * 10]
+              "max dev / tol | angle |", "|" + "---|" * 11]
     for r in rows:
         if "seconds" not in r:
-            lines.append(f"| {r['part']} | {r['tolerance']:g} | {r['tool']} | {r.get('error', '')} ||||||")
+            lines.append(f"| {r['part']} | {r['tolerance']:g} | {r['tool']} | {r.get('error', '')} |||||||")
             continue
-        dev = r.get("deviation_ratio")
+        dev, angle = r.get("deviation_ratio"), r.get("angle_regularity")
         lines.append(f"| {r['part']} | {r['tolerance']:g} | {r['tool']} | {r['seconds']:.2f} | {r['triangles']:,} | "
                      f"{'yes' if r['closed'] else 'no'} | {r['boundary']} | {r['nonmanifold']} | {r['degenerate']} | "
-                     f"{'' if dev is None else format(dev, '.2f')} |")
+                     f"{'' if dev is None else format(dev, '.2f')} | {'' if angle is None else format(angle, '.2f')} |")
     (docs / f"{args.name}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines[:12]))
+    print("\n".join(lines[:14]))
 
 
 if __name__ == "__main__":
