@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.meshing.uv_cdt import surface_speeds
+from amprep.geometry.meshing.uv_cdt import inside_loops, surface_speeds
 
 #: a cell that needs at most this many parts per direction is cut into them; one that needs more into about
 #: their square root, its children then judged at their own centres
@@ -35,6 +35,10 @@ LOCAL_FLOOR = 1 / 16
 LOOP_PARTS = 8
 #: second derivatives by central differences with this step × the face's (u,v) extent
 DIFF_STEP = 1e-4
+#: a pole's line in (u,v) gets a row of points this × the boundary segments leaving it off, spaced alike, and no other
+#: point within POLE_CLEAR × that distance of it
+POLE_ROW = 0.8
+POLE_CLEAR = 1.5
 
 _OFFSETS = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], float)
 _CORNERS = np.array([[-1, -1], [1, -1], [-1, 1], [1, 1]], float) * 0.5
@@ -207,3 +211,31 @@ def _dense(loops: list[np.ndarray]) -> list[np.ndarray]:
     surface, not straight in space, is followed."""
     t = np.arange(LOOP_PARTS) / LOOP_PARTS
     return [(lp[:, None] + t[None, :, None] * (np.roll(lp, -1, axis=0) - lp)[:, None]).reshape(-1, 2) for lp in loops]
+
+
+def clear_poles(seeds: np.ndarray, runs: list[np.ndarray], scale: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
+    """(k', 2) interior (u,v) points: seeds (k, 2) with those near a pole's line (runs: face_mesher.pole_runs', the
+    line's nodes with the node before and after) dropped and a row along it added, in the triangulation space (u,v) ×
+    scale (2,): the row D = POLE_ROW × the mean of the two boundary segments leaving the pole off the line, its points D
+    apart, no seed within POLE_CLEAR × D. Between two rows of points any triangulation joins each point to one run of
+    the other's, so no point reaches pole nodes on either side of another (loops: the face's closed (u,v) polygons)."""
+    scaled = [lp * scale for lp in loops]
+    pts, rows = seeds * scale, []
+    for run in runs:
+        r = run * scale
+        a, b = r[1], r[-2]
+        length = float(np.linalg.norm(b - a))
+        d = POLE_ROW * 0.5 * float(np.linalg.norm(r[1] - r[0]) + np.linalg.norm(r[-1] - r[-2]))
+        if length <= 0 or d <= 0:
+            continue
+        t = (b - a) / length
+        w = np.clip((pts - a) @ t / length, 0, 1)
+        pts = pts[np.linalg.norm(pts - a - w[:, None] * length * t, axis=1) > POLE_CLEAR * d]
+        normal = np.array([-t[1], t[0]])
+        if not inside_loops(((a + b) / 2 + normal * d / 2)[None], scaled)[0]:
+            normal = -normal
+        m = max(1, int(round(length / d)))
+        row = a + np.outer((np.arange(m) + 0.5) / m, b - a) + normal * d
+        row = row[inside_loops(row, scaled)]
+        rows.append(row[_off_boundary(row, np.full(len(row), 2 * d), scaled)] if len(row) else row)
+    return np.concatenate([pts, *rows]) / scale
