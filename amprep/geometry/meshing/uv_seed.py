@@ -29,6 +29,8 @@ MAX_ASPECT = 2.0
 QUALITY_ASPECT = 2.0
 #: corners nearer the boundary than this × the cell's shorter side are dropped (no slivers along the boundary)
 KEEP_OFF = 0.25
+#: the boundary is sampled in at most this many points to find how near it the corners lie
+MAX_BOUNDARY_SAMPLES = 200_000
 #: a face with no single scale (curvature_seeds' `local`): the surface's speeds are taken as at least this × their
 #: median, and its boundary is followed in space through this many pieces per side
 LOCAL_FLOOR = 1 / 16
@@ -120,8 +122,10 @@ def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarra
     all in one space, and with `by_segment` farther than KEEP_OFF × the length of the boundary segment nearest them
     (a point near a long segment would make a sliver with it; `pieces`: each boundary segment was given as this many;
     a run of zero-length segments, a pole, takes the longer of the segments either side of it); the polygons are
-    sampled at a quarter of the smallest such distance."""
-    spacing = max(KEEP_OFF * float(shorter.min()) / 2, 1e-12)
+    sampled at a quarter of the smallest such distance, in at most MAX_BOUNDARY_SAMPLES points (a cell far smaller
+    than the rest then keeps off by a little more)."""
+    perimeter = sum(float(np.linalg.norm(np.roll(a, -1, axis=0) - a, axis=1).sum()) for a in loops)
+    spacing = max(KEEP_OFF * float(shorter.min()) / 2, perimeter / MAX_BOUNDARY_SAMPLES, 1e-12)
     samples, lengths = [], []
     for a in loops:
         b = np.roll(a, -1, axis=0)
@@ -163,7 +167,7 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
     scale = length_scale * np.array([ratio, 1 / ratio])
     speeds = _local_speeds(surface, centers, b_uv) if local else scale
     aspect = QUALITY_ASPECT if true_metric else MAX_ASPECT
-    side = sizes * speeds
+    side = np.maximum(sizes * speeds, target)  # no cell cut under the tolerance: a sliver face's width is no size
     ku = np.clip(np.ceil(side[:, 0] / (aspect * side[:, 1]) - SLACK), 1, MAX_CELLS).astype(np.int64)
     kv = np.clip(np.ceil(side[:, 1] / (aspect * side[:, 0]) - SLACK), 1, MAX_CELLS).astype(np.int64)
     if (ku * kv).sum() > MAX_CELLS:
@@ -172,7 +176,7 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
         speeds = np.repeat(speeds, ku * kv, axis=0)
     centers, sizes = split_cells(centers, sizes, ku, kv)
     corners = (centers[:, None] + _CORNERS[None] * sizes[:, None]).reshape(-1, 2)
-    shorter = np.repeat((sizes * speeds).min(axis=1), 4)
+    shorter = np.repeat(np.maximum(sizes * speeds, target).min(axis=1), 4)
     lo, span = b_uv.min(axis=0), np.maximum(np.ptp(b_uv, axis=0), 1e-12)
     key = np.round((corners - lo) / span * 2**30).astype(np.int64)  # cells share corners: one point each
     _, first = np.unique(key[:, 0] * (2**31 + 1) + key[:, 1], return_index=True)
