@@ -7,31 +7,38 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
 
-from amprep.geometry.cad.read import model_from_shape
+from amprep.geometry.cad.read import model_from_shape, read_cad
 from amprep.geometry.core.checks import check_mesh
 from amprep.geometry.measure.regularity import regularity
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 from amprep.geometry.meshing.weld import folded_pairs, pole_folds
+from tests.conftest import corpus
 from tests.geometry.test_independent_distance import _worst_distance
 
 
 def _shapes():  # type: ignore[no-untyped-def]
     import cadquery as cq
 
-    return {
+    shapes = {
         "sphere": cq.Solid.makeSphere(7, angleDegrees1=-90, angleDegrees2=90),
         "dome": cq.Workplane().sphere(20).intersect(cq.Workplane().box(60, 60, 20).translate((0, 0, 10))).val(),
         "cone": cq.Solid.makeCone(8, 0, 12),
         "filleted box": cq.Workplane().box(30, 20, 10).edges().fillet(2).val(),
         "sphere cut by a box": cq.Workplane().sphere(10).cut(cq.Workplane().box(10, 10, 10).translate((5, 5, 5))).val(),
     }
+    # the same as B-splines: no closed form, no rows; their poles on the Delaunay path
+    shapes.update({f"{k} as B-splines": cq.Shape.cast(BRepBuilderAPI_NurbsConvert(shapes[k].wrapped, True).Shape())
+                   for k in ("sphere", "dome", "cone", "filleted box")})
+    return shapes
 
 
 @pytest.mark.parametrize("tol", [0.34, 0.1])
-@pytest.mark.parametrize("name", ["sphere", "dome", "cone", "filleted box", "sphere cut by a box"])
+@pytest.mark.parametrize("name", ["sphere", "dome", "cone", "filleted box", "sphere cut by a box", "sphere as B-splines",
+                                  "dome as B-splines", "cone as B-splines", "filleted box as B-splines"])
 def test_faces_with_a_pole_take_the_quality_mesh(name, tol):
     model = model_from_shape(_shapes()[name].wrapped)
     r = mesh_model(model, MeshParams(tolerance=tol, mesher="quality"))
@@ -43,6 +50,18 @@ def test_faces_with_a_pole_take_the_quality_mesh(name, tol):
     assert q >= max(0.6, q_default + 0.05), (q, q_default)
     assert r.max_error <= tol
     assert _worst_distance(model, r.mesh, samples=200) <= tol * 1.001
+
+
+@pytest.mark.parametrize("tol", [0.34, 0.1])
+def test_b_spline_poles_of_a_real_part(tol):
+    """CTC-02's B-spline version: 60 faces closed at one end, whose interior points near the pole's line joined its
+    nodes on either side of others (106 faces fell back to the old path, then 54 with the points judged by the surface's
+    lengths); a row of points along each pole's line leaves fewer than 1 % of its 597 faces to fall back."""
+    r = mesh_model(read_cad(corpus("nist_ctc02_bspline_ap203.stp")), MeshParams(tolerance=tol, mesher="quality"))
+    c = check_mesh(r.mesh)
+    assert c.closed and c.degenerate_triangles == 0, c
+    assert sum(f.meshed_by == "fallback" for f in r.mesh.faces) < 0.01 * len(r.mesh.faces)
+    assert r.max_error <= tol
 
 
 def _patch(tris: list[list[int]]) -> FacePatch:

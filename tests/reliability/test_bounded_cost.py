@@ -98,3 +98,27 @@ def test_the_chordal_kernel_runs_in_bounded_calls_that_see_a_cancel(reference_so
         with checking(cancel), pytest.raises(AmprepError) as e:
             chordal.triangle_chordal_error(corners, uv, surface)
     assert e.value.code == ErrorCode.CANCELLED
+
+
+def test_a_sliver_face_costs_the_quality_mesher_little_memory():
+    """A cylinder face 2 mm long and 1.5 µm wide (as IDF parts of FreeCAD's library have): its cells were cut square
+    at 1.5 µm, 1.3 M of them, and its boundary sampled at a quarter of that (1.9 GB, 75 s); no cell is now cut under
+    the tolerance, and the boundary is sampled in a bounded number of points."""
+    import tracemalloc
+
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.gp import gp_Ax3, gp_Cylinder
+
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
+
+    model = model_from_shape(BRepBuilderAPI_MakeFace(gp_Cylinder(gp_Ax3(), 1.0), 0.0, 1.5e-6, 0.0, 2.0).Face())
+    tracemalloc.start()
+    try:
+        r = mesh_model(model, MeshParams(tolerance=0.1, mesher="quality", parallel=False))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 50e6, f"{peak / 1e6:.0f} MB"
+    assert r.mesh.n_triangles > 0 and r.max_error <= 0.1

@@ -24,6 +24,7 @@ from amprep.geometry.meshing.uv_cdt import (
     MIN_SPACING,
     apart,
     insertion_points,
+    inside_loops,
     metric_scale,
     metric_uniform,
     min_spacing,
@@ -32,7 +33,7 @@ from amprep.geometry.meshing.uv_cdt import (
     triangle_codes,
     triangulate_pslg,
 )
-from amprep.geometry.meshing.uv_seed import curvature_seeds
+from amprep.geometry.meshing.uv_seed import clear_poles, curvature_seeds
 from amprep.geometry.meshing.weld import pole_folds
 
 
@@ -242,6 +243,21 @@ def has_pole(face: TopoDS_Face) -> bool:
     return any(BRep_Tool.Degenerated_s(e) for e in face_edges(face))
 
 
+def pole_runs(loops: list[dict]) -> list[np.ndarray]:  # type: ignore[type-arg]
+    """Each pole or apex of the loops (boundary_loops'): the (u,v) of its run of nodes on one B-rep vertex (a degenerate
+    edge's line), with the node before and the node after it: (k + 3, 2) for a run of k segments."""
+    runs = []
+    for lp in loops:
+        vertex, n = lp["vertex"], len(lp["vertex"])
+        same = (vertex >= 0) & (vertex == np.roll(vertex, -1))  # node i and node i + 1 are one vertex
+        if same.all():
+            continue
+        for start in np.flatnonzero(same & ~np.roll(same, 1)):
+            k = int(np.argmin(np.roll(same, -int(start))))  # the run's length: up to the first False after it
+            runs.append(lp["uv"][(start - 1 + np.arange(k + 3)) % n])
+    return runs
+
+
 def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
     """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,), and segment
     (n,) the B-rep edge of the segment from each node to the next; an edge with no discretisation yet gets one."""
@@ -282,35 +298,25 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
     return loops
 
 
-def _inside(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
-    """(N,) bool even-odd point-in-polygon over all loops (closed polygons (n, 2))."""
-    inside = np.zeros(len(points), bool)
-    x, y = points[:, 0:1], points[:, 1:2]
-    for poly in loops:
-        a, b = poly, np.roll(poly, -1, axis=0)
-        cond = (a[None, :, 1] > y) != (b[None, :, 1] > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xint = a[None, :, 0] + (y - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
-        inside ^= (cond & (x < xint)).sum(axis=1) % 2 == 1
-    return inside
-
-
 def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
               angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0,
               curvature_sized: bool = True, quality: bool = False) -> FacePatch:
-    """_mesh_face; a face with a pole whose quality mesh folds there (weld.pole_folds: its interior points, near the
-    pole's line in (u,v), joined to two of its nodes that are one point) is meshed again as before the quality
-    mesher, from its boundary and refinement alone."""
-    patch = _mesh_face(face_id, face, topo, surface, tolerance, angular, order, seeds, min_area, curvature_sized,
-                       quality)
-    if quality and patch.meshed_by == "quality" and has_pole(face) and pole_folds(patch):
-        patch = _mesh_face(face_id, face, topo, surface, tolerance, angular, order, seeds, min_area, False, False)
-    return patch
+    """_mesh_face. A face with a pole whose quality mesh folds there (weld.pole_folds: a point joined to two of the
+    pole's nodes, one point in space, on either side of another) is meshed again without the row along its pole's
+    line (uv_seed.clear_poles: refinement can still insert between the two), then, if that folds too, as before the
+    quality mesher, from its boundary and refinement alone."""
+    args = (face_id, face, topo, surface, tolerance, angular, order, seeds, min_area)
+    pole = quality and has_pole(face)
+    for rows in (True, False) if pole else (True,):
+        patch = _mesh_face(*args, curvature_sized, quality, pole_rows=rows)
+        if not (pole and patch.meshed_by == "quality" and pole_folds(patch)):
+            return patch
+    return _mesh_face(*args, False, False)
 
 
 def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
                angular: float, order: int = 6, seeds: np.ndarray | None = None, min_area: float = 0.0,
-               curvature_sized: bool = True, quality: bool = False) -> FacePatch:
+               curvature_sized: bool = True, quality: bool = False, pole_rows: bool = True) -> FacePatch:
     """A FacePatch for one face: CDT of its boundary loops in scaled (u,v) plus interior points (when
     `curvature_sized`, on a curved surface with a numpy evaluator and no pole, uv_seed.curvature_seeds' points in
     their stretched space; else `seeds` (k, 2) interior (u,v) points, e.g. an earlier mesh's), points inserted
@@ -339,13 +345,15 @@ def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface
                                  local=local)
         if seeded is not None:
             seeds, scale = seeded
+            if pole and pole_rows:  # points near a pole's line in (u,v) would join its nodes either side of others
+                seeds = clear_poles(seeds, pole_runs(loops), scale, [lp["uv"] for lp in loops])
     spacing = min_spacing(tolerance, scale, length_scale)
     segments = _loop_segments(loops)
     scaled_loops = [lp["uv"] * scale for lp in loops]
     pts = b_uv * scale
     tris = triangulate_pslg(pts, segments)
     cent = pts[tris].mean(axis=1)
-    holes = cent[~_inside(cent, scaled_loops)]
+    holes = cent[~inside_loops(cent, scaled_loops)]
     if seeds is not None and len(seeds):
         # no inside test needed: a seed outside the boundary polygon lies in a hole or concavity that Triangle
         # eats; such seeds are dropped after

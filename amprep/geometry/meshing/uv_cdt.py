@@ -180,3 +180,16 @@ def insertion_points(pts: np.ndarray, bad: np.ndarray, seg_code: np.ndarray, bas
     mid = 0.5 * (pts[a[rows, k]] + pts[b[rows, k]])
     centroid = pts[bad].mean(axis=1)
     return unique_points(np.where((length[rows, k] > 0)[:, None], mid, centroid))
+
+
+def inside_loops(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
+    """(N,) bool even-odd point-in-polygon over all loops (closed polygons (n, 2))."""
+    inside = np.zeros(len(points), bool)
+    x, y = points[:, 0:1], points[:, 1:2]
+    for poly in loops:
+        a, b = poly, np.roll(poly, -1, axis=0)
+        cond = (a[None, :, 1] > y) != (b[None, :, 1] > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xint = a[None, :, 0] + (y - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
+        inside ^= (cond & (x < xint)).sum(axis=1) % 2 == 1
+    return inside

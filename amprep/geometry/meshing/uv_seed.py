@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.meshing.uv_cdt import surface_speeds
+from amprep.geometry.meshing.uv_cdt import inside_loops, surface_speeds
 
 #: a cell that needs at most this many parts per direction is cut into them; one that needs more into about
 #: their square root, its children then judged at their own centres
@@ -29,12 +29,18 @@ MAX_ASPECT = 2.0
 QUALITY_ASPECT = 2.0
 #: corners nearer the boundary than this × the cell's shorter side are dropped (no slivers along the boundary)
 KEEP_OFF = 0.25
+#: the boundary is sampled in at most this many points to find how near it the corners lie
+MAX_BOUNDARY_SAMPLES = 200_000
 #: a face with no single scale (curvature_seeds' `local`): the surface's speeds are taken as at least this × their
 #: median, and its boundary is followed in space through this many pieces per side
 LOCAL_FLOOR = 1 / 16
 LOOP_PARTS = 8
 #: second derivatives by central differences with this step × the face's (u,v) extent
 DIFF_STEP = 1e-4
+#: a pole's line in (u,v) gets a row of points this × the boundary segments leaving it off, spaced alike, and no other
+#: point within POLE_CLEAR × that distance of it
+POLE_ROW = 0.8
+POLE_CLEAR = 1.5
 
 _OFFSETS = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], float)
 _CORNERS = np.array([[-1, -1], [1, -1], [-1, 1], [1, 1]], float) * 0.5
@@ -116,8 +122,10 @@ def _off_boundary(points: np.ndarray, shorter: np.ndarray, loops: list[np.ndarra
     all in one space, and with `by_segment` farther than KEEP_OFF × the length of the boundary segment nearest them
     (a point near a long segment would make a sliver with it; `pieces`: each boundary segment was given as this many;
     a run of zero-length segments, a pole, takes the longer of the segments either side of it); the polygons are
-    sampled at a quarter of the smallest such distance."""
-    spacing = max(KEEP_OFF * float(shorter.min()) / 2, 1e-12)
+    sampled at a quarter of the smallest such distance, in at most MAX_BOUNDARY_SAMPLES points (a cell far smaller
+    than the rest then keeps off by a little more)."""
+    perimeter = sum(float(np.linalg.norm(np.roll(a, -1, axis=0) - a, axis=1).sum()) for a in loops)
+    spacing = max(KEEP_OFF * float(shorter.min()) / 2, perimeter / MAX_BOUNDARY_SAMPLES, 1e-12)
     samples, lengths = [], []
     for a in loops:
         b = np.roll(a, -1, axis=0)
@@ -159,7 +167,7 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
     scale = length_scale * np.array([ratio, 1 / ratio])
     speeds = _local_speeds(surface, centers, b_uv) if local else scale
     aspect = QUALITY_ASPECT if true_metric else MAX_ASPECT
-    side = sizes * speeds
+    side = np.maximum(sizes * speeds, target)  # no cell cut under the tolerance: a sliver face's width is no size
     ku = np.clip(np.ceil(side[:, 0] / (aspect * side[:, 1]) - SLACK), 1, MAX_CELLS).astype(np.int64)
     kv = np.clip(np.ceil(side[:, 1] / (aspect * side[:, 0]) - SLACK), 1, MAX_CELLS).astype(np.int64)
     if (ku * kv).sum() > MAX_CELLS:
@@ -168,7 +176,7 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
         speeds = np.repeat(speeds, ku * kv, axis=0)
     centers, sizes = split_cells(centers, sizes, ku, kv)
     corners = (centers[:, None] + _CORNERS[None] * sizes[:, None]).reshape(-1, 2)
-    shorter = np.repeat((sizes * speeds).min(axis=1), 4)
+    shorter = np.repeat(np.maximum(sizes * speeds, target).min(axis=1), 4)
     lo, span = b_uv.min(axis=0), np.maximum(np.ptp(b_uv, axis=0), 1e-12)
     key = np.round((corners - lo) / span * 2**30).astype(np.int64)  # cells share corners: one point each
     _, first = np.unique(key[:, 0] * (2**31 + 1) + key[:, 1], return_index=True)
@@ -207,3 +215,31 @@ def _dense(loops: list[np.ndarray]) -> list[np.ndarray]:
     surface, not straight in space, is followed."""
     t = np.arange(LOOP_PARTS) / LOOP_PARTS
     return [(lp[:, None] + t[None, :, None] * (np.roll(lp, -1, axis=0) - lp)[:, None]).reshape(-1, 2) for lp in loops]
+
+
+def clear_poles(seeds: np.ndarray, runs: list[np.ndarray], scale: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
+    """(k', 2) interior (u,v) points: seeds (k, 2) with those near a pole's line (runs: face_mesher.pole_runs', the
+    line's nodes with the node before and after) dropped and a row along it added, in the triangulation space (u,v) ×
+    scale (2,): the row D = POLE_ROW × the mean of the two boundary segments leaving the pole off the line, its points D
+    apart, no seed within POLE_CLEAR × D. Between two rows of points any triangulation joins each point to one run of
+    the other's, so no point reaches pole nodes on either side of another (loops: the face's closed (u,v) polygons)."""
+    scaled = [lp * scale for lp in loops]
+    pts, rows = seeds * scale, []
+    for run in runs:
+        r = run * scale
+        a, b = r[1], r[-2]
+        length = float(np.linalg.norm(b - a))
+        d = POLE_ROW * 0.5 * float(np.linalg.norm(r[1] - r[0]) + np.linalg.norm(r[-1] - r[-2]))
+        if length <= 0 or d <= 0:
+            continue
+        t = (b - a) / length
+        w = np.clip((pts - a) @ t / length, 0, 1)
+        pts = pts[np.linalg.norm(pts - a - w[:, None] * length * t, axis=1) > POLE_CLEAR * d]
+        normal = np.array([-t[1], t[0]])
+        if not inside_loops(((a + b) / 2 + normal * d / 2)[None], scaled)[0]:
+            normal = -normal
+        m = max(1, int(round(length / d)))
+        row = a + np.outer((np.arange(m) + 0.5) / m, b - a) + normal * d
+        row = row[inside_loops(row, scaled)]
+        rows.append(row[_off_boundary(row, np.full(len(row), 2 * d), scaled)] if len(row) else row)
+    return np.concatenate([pts, *rows]) / scale
