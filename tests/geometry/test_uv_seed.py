@@ -11,7 +11,7 @@ from amprep.geometry.meshing import uv_seed
 from amprep.geometry.meshing.brepmesh import run_brepmesh
 from amprep.geometry.meshing.occt_read import extract_patch
 from amprep.geometry.meshing.params import MeshParams
-from amprep.geometry.meshing.uv_cdt import metric_scale
+from amprep.geometry.meshing.uv_cdt import inside_loops, metric_scale
 from tests.conftest import corpus
 
 ORIGIN, X, Y, Z = np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
@@ -65,7 +65,7 @@ def test_curvature_seeds_mesh_a_large_bspline_face_close_to_the_tolerance_at_onc
     scale = metric_scale(surface, np.concatenate(uv_loops))
     seeds, stretched = uv_seed.curvature_seeds(surface, uv_loops, tol, scale)
     assert 1000 < len(seeds) < 20000 and not np.allclose(stretched, scale)
-    assert fallback._inside(seeds * scale, [u * scale for u in uv_loops]).mean() > 0.95
+    assert inside_loops(seeds * scale, [u * scale for u in uv_loops]).mean() > 0.95
     first = []
     real = fallback.refine_patch
 
@@ -105,7 +105,7 @@ def test_refining_in_the_space_the_mesh_was_made_in_converges(ctc02_face35):
     assert len(loops) == 1
     uv = np.concatenate([b_uv, seeds])
     tris = triangulate_pslg(uv * scale, seg)
-    tris = tris[fallback._inside((uv * scale)[tris].mean(axis=1), [b_uv * scale])]
+    tris = tris[inside_loops((uv * scale)[tris].mean(axis=1), [b_uv * scale])]
     xyz = surface.evaluate(uv)
     err = triangle_chordal_error(xyz[tris], uv[tris], surface, 6)
     assert (err > tol).sum() > 100  # seeded for 1.3× the tolerance: work to do
