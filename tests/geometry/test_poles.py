@@ -15,7 +15,7 @@ from amprep.geometry.measure.regularity import regularity
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
-from amprep.geometry.meshing.weld import folded_pairs, pole_folds
+from amprep.geometry.meshing.weld import fins, folded_pairs, pole_folds
 from tests.conftest import corpus
 from tests.geometry.test_independent_distance import _worst_distance
 
@@ -82,3 +82,13 @@ def test_the_weld_drops_folded_pairs_only():
     faces = np.array([0, 0, 0, 1, 2, 2])
     # a pair wound opposite ways in one face goes; across faces, or wound the same way (a defect to report), stays
     assert folded_pairs(tris, faces).tolist() == [True, True, False, False, False, False]
+
+
+def test_two_faces_closing_a_narrow_corner_with_one_triangle_drop_it():
+    """Two faces meeting along two edges at a narrow corner (FreeCAD's SOT23 IDF part) each close it with the same
+    triangle of boundary nodes: a fin across faces, dropped when all its corners are on B-rep edges or vertices; a pair
+    with a corner inside a face stays (the weld's checks report it)."""
+    tris = np.array([[0, 1, 2], [1, 0, 2], [3, 4, 5], [4, 3, 5]])
+    faces = np.array([0, 1, 0, 1])
+    on_boundary = np.array([True, True, False, False])
+    assert fins(tris, faces, on_boundary).tolist() == [True, True, False, False]

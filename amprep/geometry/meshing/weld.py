@@ -12,7 +12,7 @@ from amprep.geometry.meshing.occt_read import FacePatch
 
 def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np.ndarray | None = None) -> Mesh:
     """One Mesh from per-face patches; triangles that collapse onto one vertex (poles, apexes, edges the mesher
-    collapsed) are dropped, and so are folded pairs (folded_pairs: two of a face's triangles that a pole made one). vertex_roots (n_brep_vertices,) maps B-rep vertices identified by collapsed edges."""
+    collapsed) are dropped, and so are fins (fins: two triangles on the same three vertices, wound both ways). vertex_roots (n_brep_vertices,) maps B-rep vertices identified by collapsed edges."""
     if not patches:
         return Mesh.from_arrays(np.zeros((0, 3)), np.zeros((0, 3), np.int64)).with_arrays(faces=faces)
     nodes = np.concatenate([p.nodes for p in patches])
@@ -57,7 +57,7 @@ def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np
         p.uv[p.tris] if p.uv is not None else np.full((len(p.tris), 3, 2), np.nan) for p in patches
     ])
     keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
-    keep[keep] = ~folded_pairs(tris[keep], face_ids[keep])
+    keep[keep] = ~fins(tris[keep], face_ids[keep], (dim[first] != IN_FACE)[tris[keep]].all(axis=1))
     tris, face_ids, uv = tris[keep], face_ids[keep], uv[keep]
     used = np.flatnonzero(np.bincount(tris.reshape(-1), minlength=len(first)))
     remap = np.full(len(first), -1, np.int64)
@@ -84,6 +84,16 @@ def folded_pairs(tris: np.ndarray, face_ids: np.ndarray) -> np.ndarray:
     pair = count[inv] == 2
     odd_in_group = np.bincount(inv, weights=odd, minlength=len(count))
     return pair & (odd_in_group[inv] == 1)
+
+
+def fins(tris: np.ndarray, face_ids: np.ndarray, on_boundary: np.ndarray) -> np.ndarray:
+    """(t,) bool: the triangles (t, 3) of fins: folded_pairs within a face (face_ids (t,)), and across two faces where
+    all three corners lie on B-rep edges or vertices (on_boundary (t,)): two faces meeting along two edges at a
+    narrow corner each close it with the same triangle of boundary nodes (FreeCAD's SOT23 IDF part at 0.1 mm)."""
+    out = folded_pairs(tris, face_ids)
+    rest = np.flatnonzero(on_boundary & ~out)
+    out[rest[folded_pairs(tris[rest], np.zeros(len(rest), np.int64))]] = True
+    return out
 
 
 def pole_folds(patch: FacePatch) -> bool:
