@@ -318,3 +318,42 @@ def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated(monkeypatch
         with pytest.raises(AmprepError) as err:
             mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=limit))
         assert err.value.code == ErrorCode.OUTPUT_TOO_LARGE and said in err.value.message
+
+
+def test_a_face_of_no_width_keeps_its_edges_uncut_and_is_meshed(monkeypatch):
+    """A face bounded by two edges on one line, out and back (FreeCAD's SOD-323 IDF part has two): the grading would
+    cut them for the narrow face beside it, leaving points the no-width face cannot join; they stay as discretised."""
+    from OCP.BRepBuilderAPI import (
+        BRepBuilderAPI_MakeEdge,
+        BRepBuilderAPI_MakeFace,
+        BRepBuilderAPI_MakeVertex,
+        BRepBuilderAPI_MakeWire,
+    )
+    from OCP.BRepLib import BRepLib
+    from OCP.gp import gp_Pln, gp_Pnt
+    from OCP.TopoDS import TopoDS
+
+    from amprep.geometry.cad.topology import compound
+    from amprep.geometry.meshing import face_mesher
+
+    va, vb, vc = (BRepBuilderAPI_MakeVertex(gp_Pnt(*p)).Vertex() for p in ((0, 0, 0), (10, 0, 0), (5, 0.5, 0)))
+    ab, ba = BRepBuilderAPI_MakeEdge(va, vb).Edge(), BRepBuilderAPI_MakeEdge(vb, va).Edge()
+
+    def face(*edges):
+        wire = BRepBuilderAPI_MakeWire()
+        for e in edges:
+            wire.Add(e)
+        f = BRepBuilderAPI_MakeFace(gp_Pln(), wire.Wire()).Face()
+        BRepLib.BuildCurves3d_s(f)
+        return f
+
+    narrow = face(ab, BRepBuilderAPI_MakeEdge(vb, vc).Edge(), BRepBuilderAPI_MakeEdge(vc, va).Edge())  # 0.25 mm wide
+    none = face(TopoDS.Edge_s(ab.Reversed()), TopoDS.Edge_s(ba.Reversed()))
+    model = model_from_shape(compound([narrow, none]))
+    r = mesh_model(model, MeshParams(tolerance=0.01, mesher="quality"))
+    assert r.unmeshed_faces == ()
+    on_ab = r.mesh.vertices[np.abs(r.mesh.vertices[:, 1]) < 1e-12]
+    assert len(on_ab) <= 3, "the no-width face's edges were cut"
+    monkeypatch.setattr(face_mesher, "SLIVER", -1.0)  # the rule off: cut, and the face is left unmeshed
+    r = mesh_model(model, MeshParams(tolerance=0.01, mesher="quality"))
+    assert r.unmeshed_faces != ()

@@ -130,6 +130,8 @@ ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
 GROWTH = 1.0
 #: and is cut into at most this many parts (a sliver face's width can be near zero)
 MAX_PARTS = 64
+#: a face narrower (face_width) than this × the chord tolerance has no width: its edges are not cut
+SLIVER = 1e-3
 #: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
 UV_STRAIGHT = 1e-6
 
@@ -201,12 +203,17 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
     cap: dict[int, tuple[float, object]] = {}
     straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face, or of one
     # with a pole: their points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
+    # not cut: the edges of a face of no width (two edges on one line, out and back, as FreeCAD's SOD-323 has): a
+    # point cut into one would have no partner on the other, and the face no room for triangles to join them
+    frozen: set[int] = set()
     for face, kind in zip(faces, kinds, strict=True):
         w, pole = face_width(face, topo), has_pole(face)
         for edge in face_edges(face):
             if BRep_Tool.Degenerated_s(edge):
                 continue
             ei = topo.edge_index(edge)
+            if w <= SLIVER * floor:
+                frozen.add(ei)
             if (kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei])
                     and (pole or _curved_in_uv(edge, face, topo.edge_params[ei]))):
                 straight.add(ei)
@@ -234,7 +241,7 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
                 size = np.minimum(size, limit)
             size = np.maximum(size, floor)
             parts = np.minimum(np.ceil(seg / np.maximum(size, 1e-12)), MAX_PARTS).astype(np.int64)
-            if (parts > 1).any():
+            if (parts > 1).any() and ei not in frozen:
                 topo.edge_params[ei] = split_segments(topo.edge_params[ei], parts)
 
 

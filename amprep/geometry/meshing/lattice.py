@@ -193,7 +193,9 @@ def field_of(surface: Surface, sides: Sides, tolerance: float, angular: float, s
     b, h, ok = spacing(np.abs(L) / su**2 + twist, np.abs(N) / sv**2 + twist, tolerance, angular)
     shape = (samples, samples)
     dv = (h / sv).reshape(shape)
-    if np.median(dv.max(axis=1) / dv.min(axis=1)) > ROW_SPREAD:  # no one row step fits: flat rows where it is larger
+    with np.errstate(divide="ignore", invalid="ignore"):  # a flat face (dv all inf): no spread, and not by_curvature
+        spread = np.median(dv.max(axis=1) / dv.min(axis=1))
+    if spread > ROW_SPREAD:  # no one row step fits: flat rows where it is larger
         return None
     return Field(us, vs, dv.min(axis=1), (su / b).reshape(shape), ok)
 

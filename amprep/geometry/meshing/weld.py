@@ -76,14 +76,30 @@ def folded_pairs(tris: np.ndarray, face_ids: np.ndarray) -> np.ndarray:
     nodes, one vertex); dropping both leaves each of its sides with the uses it had without the fin."""
     if len(tris) < 2:
         return np.zeros(len(tris), bool)
-    key = np.sort(tris, axis=1)
-    odd = ((tris[:, 0] > tris[:, 1]).astype(np.int8) + (tris[:, 0] > tris[:, 2]) + (tris[:, 1] > tris[:, 2])) % 2
-    rows = np.concatenate([key, face_ids[:, None].astype(np.int64)], axis=1)
-    _, inv, count = np.unique(rows, axis=0, return_inverse=True, return_counts=True)
+    rows = np.concatenate([np.sort(tris, axis=1), face_ids[:, None]], axis=1).astype(np.int64)
+    out = np.zeros(len(tris), bool)
+    cand = _repeated_rows(rows)  # the exact grouping below only on rows whose hash repeats: few, where t is large
+    if len(cand) == 0:
+        return out
+    t = tris[cand]
+    odd = ((t[:, 0] > t[:, 1]).astype(np.int8) + (t[:, 0] > t[:, 2]) + (t[:, 1] > t[:, 2])) % 2
+    _, inv, count = np.unique(rows[cand], axis=0, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
-    pair = count[inv] == 2
     odd_in_group = np.bincount(inv, weights=odd, minlength=len(count))
-    return pair & (odd_in_group[inv] == 1)
+    out[cand] = (count[inv] == 2) & (odd_in_group[inv] == 1)
+    return out
+
+
+def _repeated_rows(rows: np.ndarray) -> np.ndarray:
+    """Sorted indices of the rows (t, k) int64 whose 64-bit hash Σ rows[:, j]·c_j (wrapping) another row shares: every
+    row that has an identical row, and rarely a collision, which the caller's exact test sorts out."""
+    mult = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0x27D4EB2F165667C5], np.uint64)
+    h = np.zeros(len(rows), np.uint64)
+    for j in range(rows.shape[1]):
+        h += rows[:, j].astype(np.uint64) * mult[j % len(mult)] + np.uint64(j)
+    hs = np.sort(h)
+    dup = hs[1:][hs[1:] == hs[:-1]]
+    return np.flatnonzero(np.isin(h, dup))
 
 
 def fins(tris: np.ndarray, face_ids: np.ndarray, on_boundary: np.ndarray) -> np.ndarray:
