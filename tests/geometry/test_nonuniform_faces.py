@@ -96,3 +96,26 @@ def test_the_lattice_refuses_rows_that_cannot_take_one_step():
     assert summarize(regularity(r.mesh.corners)).mean["angle"] >= 0.6
     crowded = mesh_model(model_from_shape(_sheet("crowded")), MeshParams(tolerance=0.01, mesher="quality"))
     assert [f.meshed_by for f in crowded.mesh.faces] == ["lattice"]  # a spread rows can take (median 1.8) stays one
+
+
+def test_smoothing_stops_when_a_round_gains_little(monkeypatch):
+    """The smoothing rounds stop once one raises the mean smallest angle by under SMOOTH_GAIN: fewer node sets moved
+    than with every round run, for a mean angle regularity within about that gain of theirs."""
+    from amprep.geometry.meshing import local_refine
+
+    model = model_from_shape(_sheet("crowded"))
+    sets, inner = [], local_refine._independent
+
+    def counted(*args):  # type: ignore[no-untyped-def]
+        sets[-1] += 1
+        return inner(*args)
+
+    monkeypatch.setattr(local_refine, "_independent", counted)
+    q = {}
+    for gain in (local_refine.SMOOTH_GAIN, -np.inf):
+        monkeypatch.setattr(local_refine, "SMOOTH_GAIN", gain)
+        sets.append(0)
+        r = mesh_model(model, MeshParams(tolerance=0.05, mesher="quality"))
+        q[gain] = summarize(regularity(r.mesh.corners)).mean["angle"]
+    assert 0 < sets[0] < sets[1]
+    assert q[-np.inf] - q[local_refine.SMOOTH_GAIN] < 0.02, q

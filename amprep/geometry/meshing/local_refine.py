@@ -193,9 +193,13 @@ def flip_flat_triangles(patch: FacePatch, surface: Surface, tolerance: float, or
 #: the quality mesher's flips: passes, and the least gain (radians) of the pair's smallest angle that a flip needs
 FLIP_PASSES = 8
 FLIP_GAIN = 1e-3
-#: rounds of smooth_on_surface, and the share of the way to its neighbours' mean a node moves in one
+#: rounds of smooth_on_surface at most, and the share of the way to its neighbours' mean a node moves in one
 SMOOTH_ROUNDS = 4
 SMOOTH_RELAX = 0.8
+#: the rounds stop once one raises the face's mean smallest angle by less than this (radians, 0.6°, a mean angle
+#: regularity of 0.01): on the DTMB hull the rounds gain 0.098, 0.016, 0.005, 0.003 at 0.34 mm, 0.061, 0.009, ... at
+#: 0.01 mm, where the last two rounds took 3 s of 11
+SMOOTH_GAIN = np.pi / 3 * 0.01
 #: and at most this many sets of nodes that share no side, each moved at once, per round
 SMOOTH_SETS = 64
 
@@ -284,7 +288,8 @@ def _independent(candidates: np.ndarray, sides: np.ndarray, priority: np.ndarray
 
 
 def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6) -> FacePatch:
-    """The quality mesher's finish of a face with no single scale to its (u,v) lengths: SMOOTH_ROUNDS rounds in which
+    """The quality mesher's finish of a face with no single scale to its (u,v) lengths: up to SMOOTH_ROUNDS rounds (until
+    one gains under SMOOTH_GAIN in the mean smallest angle) in which
     every interior node, in sets no two of which share a side (_independent), is moved toward its neighbours' mean
     in space (_toward_neighbours); a move is kept only where none of the node's triangles turns over in (u,v) or goes
     over the tolerance and their smallest angle in space does not fall. Each node's triangles hold no other moving
@@ -301,6 +306,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
     angle = min_angles(xyz[tris])
     priority = (np.arange(n, dtype=np.uint64) * np.uint64(2654435761)) % np.uint64(2**32)  # a fixed scatter
     for _ in range(SMOOTH_ROUNDS):
+        before = angle.mean()
         candidates = free.copy()
         for _ in range(SMOOTH_SETS):
             movers = _independent(candidates, sides, priority)
@@ -328,4 +334,6 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
             uv[keep], xyz[keep] = trial_uv[keep], trial_xyz[keep]
             took = keep[owner]
             angle[star[took]], err[star[took]] = new_angle[took], new_err[took]
+        if angle.mean() - before < SMOOTH_GAIN:
+            break
     return replace(patch, nodes=xyz, uv=uv, error=err)
