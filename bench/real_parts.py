@@ -7,6 +7,8 @@ is, within the tolerance; and the triangles and seconds beside OCCT's.
     python bench/real_parts.py                          # freecad-common at 0.1 and 0.01 mm
     python bench/real_parts.py --package freecad-common --tolerances 0.1,0.01,0.001
     python bench/real_parts.py --tools amprep,amprep-quality,occt-delabella --name bench_real_parts_quality
+    python bench/real_parts.py --package kicad-packages3d --sample 120 --tools amprep,amprep-quality,occt-delabella \
+        --name bench_real_parts_kicad                  # 120 of KiCad's 3D models of electronic parts
 
 Downloads the package with `apt-get download` (no install) and writes docs/bench_real_parts.md and .csv.
 """
@@ -22,6 +24,8 @@ import sys
 import tempfile
 import zipfile
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from convert import ROOT, run_one  # noqa: E402
@@ -66,6 +70,8 @@ def main() -> None:
     ap.add_argument("--tools", default="amprep,occt-delabella", help="amprep, amprep-quality, occt-delabella (the "
                     "reference every other tool is set beside)")
     ap.add_argument("--from-log", help="write the tables from the JSON lines a run printed (e.g. one stopped early)")
+    ap.add_argument("--sample", type=int, default=0, help="only this many parts, evenly spaced over the package's "
+                    "sorted list (a package of thousands, as kicad-packages3d)")
     args = ap.parse_args()
     if args.from_log:
         rows = [json.loads(line) for line in Path(args.from_log).read_text().splitlines() if line.startswith("{")]
@@ -73,6 +79,8 @@ def main() -> None:
         return
     tmp = Path(tempfile.mkdtemp(prefix="amprep-real-"))
     parts = package_parts(args.package, tmp)
+    if 0 < args.sample < len(parts):
+        parts = [parts[i] for i in np.linspace(0, len(parts) - 1, args.sample).round().astype(int)]
     rows = []
     for part in parts:
         label = str(part.relative_to(tmp)).replace("tree/usr/share/", "")
@@ -114,8 +122,10 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, compl
         cells.setdefault((r["part"], r["tolerance"]), {})[r["tool"]] = r
     lines = [f"# Real parts outside the corpus: {args.package}", "",
              f"Made by `python bench/real_parts.py --package {args.package} --tolerances {args.tolerances}"
-             f"{'' if args.tools == 'amprep,occt-delabella' else f' --tools {args.tools} --name {args.name}'}`: every "
-             f"STEP, IGES and BREP file the Debian package ships and the B-rep of each FreeCAD document in it, each once "
+             f"{'' if args.tools == 'amprep,occt-delabella' else f' --tools {args.tools} --name {args.name}'}"
+             f"{f' --sample {args.sample}' if getattr(args, 'sample', 0) else ''}`: "
+             f"{'an evenly spaced sample of the' if getattr(args, 'sample', 0) else 'every'} "
+             f"STEP, IGES and BREP files the Debian package ships and the B-rep of each FreeCAD document in it, each once "
              f"by content ({n_parts} parts{'' if complete else ', those a run stopped early had reached, from its log'}), "
              "converted end to end in a child process per cell by amprep (`amprep-quality`: `--mesher quality`) and by "
              "the bare OCCT pipeline (its reader, BRepMesh Delabella, StlAPI_Writer). `closed`: every edge of the "

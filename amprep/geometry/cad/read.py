@@ -27,6 +27,7 @@ from OCP.XSControl import XSControl_Reader
 
 from amprep.errors import AmprepError, ErrorCode, is_occt_failure
 from amprep.geometry.cad.locations import bake_scaled_locations
+from amprep.geometry.cad.pcurve_shifts import fix_shifted_pcurves
 from amprep.geometry.cad.topology import compound, explore
 from amprep.geometry.cad.wire_crossings import crossing_faces
 from amprep.geometry.core.formats import ACIS_FORMATS, sniff_path
@@ -236,7 +237,8 @@ def read_shape(path: str | Path, fmt: str) -> tuple[TopoDS_Shape, str]:
 
 def read_cad(path: str | Path, fmt: str | None = None) -> CadModel:
     """Read a STEP, IGES, BREP or ACIS (SAT, SAB, DXF) file into a CadModel in mm; faces outside solids are sewn
-    (sew_loose_faces) except ACIS's, whose faces share their edges already."""
+    (sew_loose_faces) except ACIS's, whose faces share their edges already; wires open by a period in (u,v) are
+    shifted onto one (fix_shifted_pcurves)."""
     fmt = fmt or sniff_path(Path(path))
     if fmt in ACIS_FORMATS:
         from amprep.geometry.cad.acis import read_acis_file
@@ -245,5 +247,9 @@ def read_cad(path: str | Path, fmt: str | None = None) -> CadModel:
             acis = read_acis_file(path, fmt)
         return model_from_shape(acis.shape, fmt, acis.units, False, tuple(acis.notes()), tuple(acis.skipped))
     shape, units = read_shape(path, fmt)
+    with occt_messages_muted():
+        shifted = fix_shifted_pcurves(shape)
     shape, sewn = sew_loose_faces(shape)
-    return model_from_shape(shape, fmt, units, sewn)
+    notes = (f"{shifted} face boundar{'y' if shifted == 1 else 'ies'} in (u,v) a period apart: moved onto one period",
+             ) if shifted else ()
+    return model_from_shape(shape, fmt, units, sewn, notes)

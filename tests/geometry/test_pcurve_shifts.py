@@ -1,0 +1,70 @@
+"""Pcurves a period apart, forced: a cylinder whose seam's two pcurves are moved 4π apart and its top circle's by a
+period (the pattern of KiCad's THT transformer model, where OCCT's BRepMesh gave no triangulation and both meshers
+went 3–30× over the tolerance): read, the loop is closed again and both meshers give what the sound cylinder gives,
+within tolerance by OCCT's distance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from OCP.BRep import BRep_Builder, BRep_Tool
+from OCP.BRepTools import BRepTools
+from OCP.gp import gp_Vec2d
+from OCP.TopAbs import TopAbs_FACE, TopAbs_FORWARD
+from OCP.TopoDS import TopoDS
+
+from amprep.geometry.cad import read
+from amprep.geometry.cad.pcurve_shifts import fix_shifted_pcurves
+from amprep.geometry.cad.topology import explore, face_edges
+from amprep.geometry.core.checks import check_mesh
+from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.pipeline import mesh_model
+from tests.conftest import corpus
+from tests.geometry.test_independent_distance import _worst_distance
+
+
+def _shifted_cylinder(path) -> None:  # type: ignore[no-untyped-def]
+    import cadquery as cq
+
+    solid = cq.Solid.makeCylinder(5, 10).wrapped
+    face = next(f for f in explore(solid, TopAbs_FACE, TopoDS.Face_s) if BRep_Tool.Surface_s(f).IsUPeriodic())
+    shift, builder = gp_Vec2d(-2 * np.pi, 0), BRep_Builder()
+    for e in face_edges(face):
+        a, b = BRep_Tool.Range_s(e)
+        if BRep_Tool.IsClosed_s(e, face):
+            if e.Orientation() == TopAbs_FORWARD:
+                c1 = BRep_Tool.CurveOnSurface_s(e, face, a, b)
+                c2 = BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(e.Reversed()), face, a, b)
+                builder.UpdateEdge(e, c1, c2.Translated(shift), face, BRep_Tool.Tolerance_s(e))
+        elif abs(BRep_Tool.CurveOnSurface_s(e, face, a, b).Value(a).Y() - 10) < 1e-9:  # the top circle
+            builder.UpdateEdge(e, BRep_Tool.CurveOnSurface_s(e, face, a, b).Translated(shift), face,
+                               BRep_Tool.Tolerance_s(e))
+    BRepTools.Write_s(solid, str(path))
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_a_loop_open_by_a_period_is_closed_on_reading(tmp_path, monkeypatch, mesher):
+    import cadquery as cq
+
+    _shifted_cylinder(tmp_path / "shifted.brep")
+    model = read.read_cad(tmp_path / "shifted.brep")
+    assert any("a period apart" in n for n in model.notes)
+    r = mesh_model(model, MeshParams(tolerance=0.01, mesher=mesher))
+    checks = check_mesh(r.mesh)
+    assert checks.closed and r.unmeshed_faces == ()
+    assert _worst_distance(model, r.mesh, samples=300) <= 0.01 * 1.001
+    BRepTools.Write_s(cq.Solid.makeCylinder(5, 10).wrapped, str(tmp_path / "sound.brep"))
+    sound = mesh_model(read.read_cad(tmp_path / "sound.brep"), MeshParams(tolerance=0.01, mesher=mesher))
+    assert r.mesh.n_triangles == sound.mesh.n_triangles
+
+    monkeypatch.setattr(read, "fix_shifted_pcurves", lambda shape: 0)  # as read before: open, or far off the surface
+    r = mesh_model(read.read_cad(tmp_path / "shifted.brep"), MeshParams(tolerance=0.01, mesher=mesher))
+    assert not check_mesh(r.mesh).closed or _worst_distance(model, r.mesh, samples=300) > 0.1
+
+
+def test_sound_parts_are_left_as_they_are():
+    """No wire of the corpus's periodic faces is open by a period: nothing is moved (one circle of a cylinder, whose
+    start and end differ by a period, is a closed loop, not a shifted one)."""
+    for name in ("nist_ctc02_ap242.stp", "occt_top_invalid.brep", "voron_hotend_mount_dragon.step"):
+        shape, _ = read.read_shape(corpus(name), name.rsplit(".", 1)[1].replace("stp", "step"))
+        assert fix_shifted_pcurves(shape) == 0, name
