@@ -123,8 +123,8 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, compl
     lines = [f"# Real parts outside the corpus: {args.package}", "",
              f"Made by `python bench/real_parts.py --package {args.package} --tolerances {args.tolerances}"
              f"{'' if args.tools == 'amprep,occt-delabella' else f' --tools {args.tools} --name {args.name}'}"
-             f"{f' --sample {args.sample}' if getattr(args, 'sample', 0) else ''}`: "
-             f"{'an evenly spaced sample of the' if getattr(args, 'sample', 0) else 'every'} "
+             f"{f' --sample {args.sample}' if args.sample else ''}`: "
+             f"{'an evenly spaced sample of the' if args.sample else 'every'} "
              f"STEP, IGES and BREP files the Debian package ships and the B-rep of each FreeCAD document in it, each once "
              f"by content ({n_parts} parts{'' if complete else ', those a run stopped early had reached, from its log'}), "
              "converted end to end in a child process per cell by amprep (`amprep-quality`: `--mesher quality`) and by "

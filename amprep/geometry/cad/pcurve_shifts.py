@@ -59,13 +59,15 @@ def _walk(face: TopoDS_Face, edges: list[TopoDS_Edge], period: np.ndarray) -> li
     that is not its predecessor's seam run back, then the one whose start lies nearest its predecessor's end modulo
     the period) with the shift (2,) that puts its start there; None where every edge's end is some edge's start
     already, or the walk or the loop does not close."""
+    if len(edges) > MAX_EDGES:
+        return None
     ends = [_ends(face, e) for e in edges]
     if any(x is None for x in ends):
         return None
     gap = GAP_SHARE * period[period > 0].min()
-    starts = np.array([x[0] for x in ends])  # type: ignore[index]
-    if len(edges) > MAX_EDGES or all(np.linalg.norm(starts - x[1], axis=1).min() <= gap for x in ends):  # type: ignore[index]
-        return None  # closed already (or too long a wire to walk)
+    uv = np.array(ends)  # (n, 2, 2): each edge's start and end
+    if (np.linalg.norm(uv[:, None, 1] - uv[None, :, 0], axis=2).min(axis=1) <= gap).all():
+        return None  # closed already: every end is some edge's start
     first = [TopExp.FirstVertex_s(e, True) for e in edges]
     last = [TopExp.LastVertex_s(e, True) for e in edges]
     p = np.where(period > 0, period, 1.0)
