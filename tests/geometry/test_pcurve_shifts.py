@@ -68,3 +68,56 @@ def test_sound_parts_are_left_as_they_are():
     for name in ("nist_ctc02_ap242.stp", "occt_top_invalid.brep", "voron_hotend_mount_dragon.step"):
         shape, _ = read.read_shape(corpus(name), name.rsplit(".", 1)[1].replace("stp", "step"))
         assert fix_shifted_pcurves(shape) == 0, name
+
+
+def _torus_with_a_seam_off(path, off: float) -> None:  # type: ignore[no-untyped-def]
+    """A quarter torus whose seam's two pcurves are moved `off` along u, off its circles' ends by more than the
+    vertices' tolerance in (u,v) (KiCad's Fastron inductor lead: 1e-5 on a torus of radii 0.45)."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeTorus
+
+    solid = BRepPrimAPI_MakeTorus(20, 5, np.pi / 2).Shape()
+    face = next(f for f in explore(solid, TopAbs_FACE, TopoDS.Face_s) if BRep_Tool.Surface_s(f).IsVPeriodic())
+    for e in face_edges(face):
+        if BRep_Tool.IsClosed_s(e, face) and e.Orientation() == TopAbs_FORWARD:
+            a, b = BRep_Tool.Range_s(e)
+            c1 = BRep_Tool.CurveOnSurface_s(e, face, a, b)
+            c2 = BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(e.Reversed()), face, a, b)
+            BRep_Builder().UpdateEdge(e, c1.Translated(gp_Vec2d(off, 0)), c2.Translated(gp_Vec2d(off, 0)), face,
+                                      BRep_Tool.Tolerance_s(e))
+    BRepTools.Write_s(solid, str(path))
+
+
+def _explorer_edges(face, wire):  # type: ignore[no-untyped-def]
+    from OCP.BRepTools import BRepTools_WireExplorer
+
+    found, wexp = [], BRepTools_WireExplorer(wire, face)
+    while wexp.More():
+        found.append(TopoDS.Edge_s(wexp.Current()))
+        wexp.Next()
+    return found
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_a_wire_occts_explorer_stops_in_is_walked_whole(tmp_path, monkeypatch, mesher):
+    """OCCT's wire explorer takes a seam 1e-5 off in (u,v) as the end of the wire (one edge of four): every face is
+    still meshed from its whole loop, closed and within tolerance by OCCT's distance; with the explorer alone the
+    face's loop is one edge and the mesh is open."""
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_WIRE
+
+    from amprep.geometry.meshing import face_mesher
+
+    _torus_with_a_seam_off(tmp_path / "torus.brep", 1e-5)
+    model = read.read_cad(tmp_path / "torus.brep")
+    torus = next(f for f in model.faces if BRep_Tool.Surface_s(f).IsVPeriodic())
+    wire = explore(torus, TopAbs_WIRE, TopoDS.Wire_s)[0]
+    assert len(_explorer_edges(torus, wire)) < len(explore(wire, TopAbs_EDGE, TopoDS.Edge_s)) == 4
+    # with the default mesher, a tolerance OCCT's own mesh of the torus misses: the face is meshed again by ours
+    params = MeshParams(tolerance=0.01 if mesher == "quality" else 0.002, mesher=mesher)
+    r = mesh_model(model, params)
+    assert model.faces.index(torus) in r.fallback_faces
+    assert check_mesh(r.mesh).closed and r.unmeshed_faces == ()
+    assert _worst_distance(model, r.mesh, samples=300) <= params.tolerance * 1.001
+
+    monkeypatch.setattr(face_mesher, "wire_edges", _explorer_edges)
+    r = mesh_model(read.read_cad(tmp_path / "torus.brep"), params)
+    assert not check_mesh(r.mesh).closed or r.unmeshed_faces != ()

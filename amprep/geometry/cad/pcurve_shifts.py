@@ -54,32 +54,24 @@ def _ends(face: TopoDS_Face, edge: TopoDS_Edge) -> tuple[np.ndarray, np.ndarray]
     return np.array(pcurve.Value(a).Coord()), np.array(pcurve.Value(b).Coord())
 
 
-def _walk(face: TopoDS_Face, edges: list[TopoDS_Edge], period: np.ndarray) -> list[tuple[int, np.ndarray]] | None:
+def _walk(face: TopoDS_Face, edges: list[TopoDS_Edge], ends: list[tuple[np.ndarray, np.ndarray]], period: np.ndarray,
+          gap: float) -> list[tuple[int, np.ndarray]] | None:
     """The edges in the order the wire runs them (each starting at its predecessor's last vertex; of several, one
     that is not its predecessor's seam run back, then the one whose start lies nearest its predecessor's end modulo
-    the period) with the shift (2,) that puts its start there; None where every edge's end is some edge's start
-    already, or the walk or the loop does not close."""
-    if len(edges) > MAX_EDGES:
-        return None
-    ends = [_ends(face, e) for e in edges]
-    if any(x is None for x in ends):
-        return None
-    gap = GAP_SHARE * period[period > 0].min()
-    uv = np.array(ends)  # (n, 2, 2): each edge's start and end
-    if (np.linalg.norm(uv[:, None, 1] - uv[None, :, 0], axis=2).min(axis=1) <= gap).all():
-        return None  # closed already: every end is some edge's start
+    the period (2,), 0 where not periodic) with the shift (2,) that puts its start there; None where the walk or the
+    loop does not close within `gap` in (u,v)."""
     first = [TopExp.FirstVertex_s(e, True) for e in edges]
     last = [TopExp.LastVertex_s(e, True) for e in edges]
     p = np.where(period > 0, period, 1.0)
-    order, used, at = [(0, np.zeros(2))], {0}, ends[0][1]  # type: ignore[index]
+    order, used, at = [(0, np.zeros(2))], {0}, ends[0][1]
     while len(order) < len(edges):
         prev = order[-1][0]
         best = None
         for i in range(len(edges)):
             if i in used or not first[i].IsSame(last[prev]):
                 continue
-            shift = np.where(period > 0, np.round((at - ends[i][0]) / p) * p, 0.0)  # type: ignore[index]
-            miss = float(np.linalg.norm(ends[i][0] + shift - at))  # type: ignore[index]
+            shift = np.where(period > 0, np.round((at - ends[i][0]) / p) * p, 0.0)
+            miss = float(np.linalg.norm(ends[i][0] + shift - at))
             rank = (edges[i].IsSame(edges[prev]), miss)  # a seam's other use, straight back along it, last
             if miss <= gap and (best is None or rank < best[0]):
                 best = (rank, i, shift)
@@ -87,15 +79,45 @@ def _walk(face: TopoDS_Face, edges: list[TopoDS_Edge], period: np.ndarray) -> li
             return None
         order.append((best[1], best[2]))
         used.add(best[1])
-        at = ends[best[1]][1] + best[2]  # type: ignore[index]
-    return order if np.linalg.norm(at - ends[0][0]) <= gap else None  # type: ignore[index]
+        at = ends[best[1]][1] + best[2]
+    return order if np.linalg.norm(at - ends[0][0]) <= gap else None
+
+
+def _all_ends(face: TopoDS_Face, edges: list[TopoDS_Edge]) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """_ends of every edge; None when one has no pcurve on the face or there are more than MAX_EDGES."""
+    if not edges or len(edges) > MAX_EDGES:
+        return None
+    ends = [_ends(face, e) for e in edges]
+    return None if any(x is None for x in ends) else ends  # type: ignore[return-value]
+
+
+def ordered_edges(face: TopoDS_Face, wire: TopoDS_Wire) -> list[TopoDS_Edge] | None:
+    """The wire's oriented edges in the order it runs them on the face, by vertices and, of several, the start nearest
+    in (u,v) (_walk, no shift; the loop closing within GAP_SHARE of the face's (u,v) box diagonal); None when it does
+    not close. For wires OCCT's BRepTools_WireExplorer stops in: it takes the next edge only within the vertex's
+    tolerance in (u,v), and a seam 1e-5 off on a torus of small radii (a KiCad inductor's lead) ends its walk."""
+    edges = explore(wire, TopAbs_EDGE, TopoDS.Edge_s)
+    ends = _all_ends(face, edges)
+    if ends is None:
+        return None
+    uv = np.array(ends).reshape(-1, 2)
+    gap = GAP_SHARE * float(np.linalg.norm(uv.max(axis=0) - uv.min(axis=0)))
+    order = _walk(face, edges, ends, np.zeros(2), gap)
+    return None if order is None else [edges[i] for i, _ in order]
 
 
 def shift_wire(face: TopoDS_Face, wire: TopoDS_Wire, period: np.ndarray) -> bool:
     """Move the wire's pcurves on the face by whole periods (period (2,): u and v, 0 where not periodic) so that the
     loop closes in (u,v) (_walk); True when one moved. A seam's two pcurves are moved apart as their uses need."""
     edges = explore(wire, TopAbs_EDGE, TopoDS.Edge_s)
-    order = _walk(face, edges, period) if edges else None
+    ends = _all_ends(face, edges)
+    if ends is None:
+        return False
+    gap = GAP_SHARE * period[period > 0].min()
+    uv = np.array(ends)  # (n, 2, 2): each edge's start and end
+    if (np.linalg.norm(uv[:, None, 1] - uv[None, :, 0], axis=2).min(axis=1) <= gap).all():
+        return False  # closed already: every end is some edge's start
+    order = _walk(face, edges, ends, period, gap)
     if order is None or not any(np.any(s != 0) for _, s in order):
         return False
     builder = BRep_Builder()

@@ -112,7 +112,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
         grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
         planned = plan_lattices(faces, [f.surfaces[i] for i in remesh],  # type: ignore[misc]
-                                [boundary_loops(face, f.topo, target, f.params.angular) for face in faces], f.topo,
+                                [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces], f.topo,
                                 target, f.params.angular, f.params.max_triangles)
         f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
 
@@ -142,6 +142,14 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew to {total:,} triangles, over the limit of "
                           f"{f.params.max_triangles:,}: use a coarser tolerance, the default mesher or a higher "
                           "max_triangles")
+
+
+def _loops_to_plan(face, topo: Topology, target: float, angular: float) -> list[dict]:  # type: ignore[no-untyped-def,type-arg]
+    """boundary_loops, or none where a wire does not join up (no lattice is planned; meshing the face says why)."""
+    try:
+        return boundary_loops(face, topo, target, angular)
+    except AmprepError:
+        return []
 
 
 def _measure(f: FaceStates, round_: int, todo: set[int], first_error: dict[int, np.ndarray], stage: Progress) -> None:

@@ -10,10 +10,11 @@ from OCP.BRepGProp import BRepGProp
 from OCP.BRepTools import BRepTools_WireExplorer
 from OCP.GCPnts import GCPnts_TangentialDeflection
 from OCP.GProp import GProp_GProps
-from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.pcurve_shifts import ordered_edges
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
@@ -265,6 +266,21 @@ def pole_runs(loops: list[dict]) -> list[np.ndarray]:  # type: ignore[type-arg]
     return runs
 
 
+def wire_edges(face: TopoDS_Face, wire) -> list[TopoDS_Edge]:  # type: ignore[no-untyped-def]
+    """The wire's oriented edges in the order it runs them on the face: OCCT's BRepTools_WireExplorer, or where it
+    stops before the last edge, pcurve_shifts.ordered_edges; MESHING_FAILED when neither walks the whole wire."""
+    found, wexp = [], BRepTools_WireExplorer(wire, face)
+    while wexp.More():
+        found.append(TopoDS.Edge_s(wexp.Current()))
+        wexp.Next()
+    if len(found) == len(explore(wire, TopAbs_EDGE, TopoDS.Edge_s)):
+        return found
+    walked = ordered_edges(face, wire)
+    if walked is None:
+        raise AmprepError(ErrorCode.MESHING_FAILED, "the edges of a wire do not join up into one loop")
+    return walked
+
+
 def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
     """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,), and segment
     (n,) the B-rep edge of the segment from each node to the next; an edge with no discretisation yet gets one."""
@@ -272,9 +288,7 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
     loops = []
     for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
         uvs, verts, edges, pars, segs = [], [], [], [], []
-        wexp = BRepTools_WireExplorer(wire, face)
-        while wexp.More():
-            edge = TopoDS.Edge_s(wexp.Current())
+        for edge in wire_edges(face, wire):
             ei = topo.edge_index(edge)
             degenerate = BRep_Tool.Degenerated_s(edge)
             params = topo.edge_params[ei]
@@ -285,8 +299,7 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
                 raise AmprepError(ErrorCode.MESHING_FAILED, "an edge of face has no curve on its surface")
             v1, p1, v2, p2 = topo.edge_ends(edge)
             if not degenerate and v1 != v2 and topo.root(v1) == topo.root(v2) and len(params) == 2:
-                wexp.Next()  # an edge collapse_short_edges collapsed: its two ends are one node, the next edge's
-                continue
+                continue  # an edge collapse_short_edges collapsed: its two ends are one node, the next edge's
             n = len(params) - 1  # the last point starts the next edge
             for t in params[:n]:
                 uvs.append(pcurve.Value(t).Coord())
@@ -298,7 +311,6 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             edges.append(np.where(vtx >= 0, -1, ei))
             pars.append(np.where(vtx >= 0, np.nan, params[:n]))
             segs.append(np.full(n, ei, np.int64))
-            wexp.Next()
         if uvs:
             loops.append(dict(uv=np.array(uvs, float), vertex=np.concatenate(verts),
                               edge=np.concatenate(edges), param=np.concatenate(pars), segment=np.concatenate(segs)))
