@@ -82,3 +82,69 @@ def test_an_stl_of_another_part_is_an_error_with_its_code():
     with pytest.raises(AmprepError) as err:
         analyze_file(corpus("voron_vhb_din_mount.step"), corpus("voron_hotend_mount_dragon.stl"), params=FAST)
     assert err.value.code.value == "stl_mismatch"
+
+
+def test_our_own_stl_is_placed_where_it_was_made(tmp_path):
+    """An STL we wrote in the CAD's frame is placed within float32's rounding of where it was: the fit to the exact
+    surfaces slides along their planes (point-to-plane), where pulling corners onto their projections left the 0.5 mm
+    STL of this part 14 µm off (0.145 mm in translation)."""
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.io.stl import read_stl
+    from amprep.geometry.placement.place import place_user_stl
+
+    model = read_cad(corpus("voron_vhb_din_mount.step"))
+    write_stl(mesh_model(model, MeshParams(tolerance=0.5)).mesh, tmp_path / "own.stl")
+    user = read_stl(tmp_path / "own.stl")
+    placed = place_user_stl(model, user, MeshParams(tolerance=0.5))
+    moved = np.linalg.norm(placed.fit.apply(user.vertices) - user.vertices, axis=1)
+    assert moved.max() < 2e-5  # float32 at 300 mm rounds by up to 1.5e-5 mm
+    assert placed.unmatched == 0
+
+
+def _cone_stl(tmp_path, tol: float):  # type: ignore[no-untyped-def]
+    """A cone with its apex (and a disc) as a CAD file and our STL of it at `tol`, with the true face of each
+    triangle."""
+    import cadquery as cq
+    from OCP.BRepTools import BRepTools
+
+    shape = cq.Solid.makeCone(6, 0, 9).wrapped
+    BRepTools.Write_s(shape, str(tmp_path / "cone.brep"))
+    mesh = mesh_model(model_from_shape(shape), MeshParams(tolerance=tol)).mesh
+    write_stl(mesh, tmp_path / "cone.stl")
+    return tmp_path / "cone.brep", tmp_path / "cone.stl", mesh
+
+
+def test_a_discs_triangles_with_every_corner_on_its_rim_are_given_the_disc(tmp_path):
+    """The disc's fan has every corner on the rim, which the cone passes through too: the face whose surface lies
+    nearest each triangle's centroid is taken, so every triangle gets the face it was made on."""
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.io.stl import read_stl
+    from amprep.geometry.placement.place import place_user_stl
+
+    brep, stl, mesh = _cone_stl(tmp_path, 0.5)
+    placed = place_user_stl(read_cad(brep), read_stl(stl), MeshParams(tolerance=0.5))
+    kinds = np.array([f.surface_type for f in mesh.faces])
+    assert (kinds[placed.mesh.face_ids] == kinds[mesh.face_ids]).all()
+
+
+@pytest.mark.parametrize("method", ["sma", "adaptive", "vta"])
+def test_refining_an_stl_on_a_cone_with_an_apex_does_not_fold(tmp_path, method):
+    """A user's STL has one (u,v) at the cone's apex, whatever the triangle: each apex corner is given the middle of
+    its triangle's other two in u before refining, so the refined cone is closed and crosses nowhere (SMA and
+    adaptive folded around the apex, thousands of crossing pairs on the corpus's CTC-02)."""
+    from amprep.geometry.core.checks import check_mesh
+    from amprep.geometry.measure.defects import self_intersections
+    from amprep.jobs.refine import RefineParams, refine_file
+
+    brep, stl, _ = _cone_stl(tmp_path, 0.5)
+    r = refine_file(brep, stl, MeshParams(tolerance=0.5), RefineParams(method=method, compare=False))
+    out = r.cad_mesh
+    assert out.n_triangles > 2 * read_triangles(stl)
+    assert check_mesh(out).closed
+    assert self_intersections(out)[0] == 0
+
+
+def read_triangles(path) -> int:  # type: ignore[no-untyped-def]
+    from amprep.geometry.io.stl import read_stl
+
+    return read_stl(path).n_triangles

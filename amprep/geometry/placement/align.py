@@ -58,6 +58,28 @@ def kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) 
     return R, cd - R @ cs
 
 
+def point_to_plane(src: np.ndarray, dst: np.ndarray, normals: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R, t of one Gauss–Newton step on Σ w_i (n_i · (R·src_i + t − dst_i))², linearised about the identity and the
+    points' centroid: the motion that slides each (n, 3) point along its target's plane costs nothing, so a fit to
+    surfaces converges where point-to-point pulls toward the facets' corners; a direction the planes do not fix
+    (a cylinder's own axis and turn) is not moved (least squares' minimum-norm solution)."""
+    w = np.sqrt(np.asarray(weights, float) / np.sum(weights))[:, None]
+    centre = (weights @ src) / np.sum(weights)
+    arm = src - centre
+    scale = max(float(np.abs(arm).max(initial=0.0)), 1e-12)  # rotations in length units, like translations
+    rows = np.hstack([np.cross(arm, normals) / scale, normals]) * w
+    rhs = -((src - dst) * normals).sum(axis=1) * w[:, 0]
+    x = np.linalg.lstsq(rows, rhs, rcond=1e-6)[0]
+    omega, tau = x[:3] / scale, x[3:]
+    angle = float(np.linalg.norm(omega))
+    R = np.eye(3)
+    if angle > 0:
+        k = omega / angle
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        R = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K  # Rodrigues
+    return R, centre + tau - R @ centre
+
+
 def principal_frames(points: np.ndarray) -> list[np.ndarray]:
     """The 4 proper frames (3, 3) (rows = axes) of a cloud's principal axes, largest variance first, up to signs."""
     centred = points - points.mean(axis=0)

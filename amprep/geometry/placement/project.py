@@ -39,19 +39,39 @@ class ReferenceCloud:
         return cls(np.concatenate(pts), np.concatenate(face), np.concatenate(uv))
 
 
+def _span(surface: Surface) -> np.ndarray:
+    """(2,) the face's (u,v) extent (1 where unknown), the scale of the difference steps."""
+    if surface.bounds is None:
+        return np.array([1.0, 1.0])
+    u1, u2, v1, v2 = surface.bounds
+    return np.array([max(u2 - u1, 1e-9), max(v2 - v1, 1e-9)])
+
+
+def _tangents(surface: Surface, uv: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(S_u, S_v) (n, 3) each at (n, 2) uv, by central differences of 1e-6 × span."""
+    h = 1e-6 * span
+    su = (surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0])) / (2 * h[0])
+    sv = (surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]])) / (2 * h[1])
+    return su, sv
+
+
+def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
+    """(n, 3) unit normals S_u × S_v / |S_u × S_v| at (n, 2) uv; zero where the two are parallel (a pole, an apex)."""
+    su, sv = _tangents(surface, np.asarray(uv, float), _span(surface))
+    n = np.cross(su, sv)
+    size = np.linalg.norm(n, axis=1, keepdims=True)
+    scale = np.linalg.norm(su, axis=1, keepdims=True) * np.linalg.norm(sv, axis=1, keepdims=True)
+    return np.where(size > 1e-9 * scale, n / np.where(size > 0, size, 1.0), 0.0)
+
+
 def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Newton on |S(u,v) − p|² from uv0, all points at once, derivatives by central differences:
     ((n, 2) (u,v), (n,) distance |S(u,v) − p|)."""
     uv = np.array(uv0, dtype=float)
-    span = np.array([1.0, 1.0])
-    if surface.bounds is not None:
-        u1, u2, v1, v2 = surface.bounds
-        span = np.array([max(u2 - u1, 1e-9), max(v2 - v1, 1e-9)])
-    h = 1e-6 * span
+    span = _span(surface)
     for _ in range(iterations):
         s = surface.evaluate(uv)
-        su = (surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0])) / (2 * h[0])
-        sv = (surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]])) / (2 * h[1])
+        su, sv = _tangents(surface, uv, span)
         r = s - points
         a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
         gu, gv = (su * r).sum(1), (sv * r).sum(1)
@@ -68,21 +88,26 @@ def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterat
 
 
 def unwrap_corners(uv: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
-    """(m, 3, 2) corner parameters with each periodic one moved by whole periods next to the first corner's."""
+    """(m, k, 2) points' parameters with each periodic one moved by whole periods next to one point's, the point whose
+    choice spans the least: at a cone's apex or a sphere's pole u is arbitrary, and the rim's corners must not be
+    wrapped about it."""
     out = np.array(uv, dtype=float)
-    for k, per in enumerate(periods):
+    for c, per in enumerate(periods):
         if per:
-            ref = out[:, :1, k]
-            out[:, :, k] = ref + (out[:, :, k] - ref + per / 2) % per - per / 2
+            ref = out[:, :, c]  # (m, k): every point tried as the one the others move next to
+            moved = ref[:, :, None] + (ref[:, None, :] - ref[:, :, None] + per / 2) % per - per / 2  # (m, ref, k)
+            best = np.argmin(moved.max(axis=2) - moved.min(axis=2), axis=1)
+            out[:, :, c] = moved[np.arange(len(out)), best]
     return out
 
 
-def _project_faces(corners: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
+def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
                    trees: dict[int, tuple[np.ndarray, cKDTree]]) -> tuple[np.ndarray, np.ndarray]:
-    """((m, 3, 2) uv, (m, 3) distance) of triangles' corners projected on the surface of their given face."""
-    m = len(corners)
-    uv = np.zeros((m, 3, 2))
-    dist = np.full((m, 3), np.inf)
+    """((m, k, 2) uv, (m, k) distance) of each triangle's k points (m, k, 3) (its corners, then its centroid)
+    projected on the surface of its given face, the periodic parameters next to the first point's."""
+    m, k = points.shape[:2]
+    uv = np.zeros((m, k, 2))
+    dist = np.full((m, k), np.inf)
     for fid in np.unique(face):
         surf = surfaces.get(int(fid))
         if surf is None or fid < 0:
@@ -92,34 +117,44 @@ def _project_faces(corners: np.ndarray, face: np.ndarray, cloud: ReferenceCloud,
             trees[int(fid)] = (own, cKDTree(cloud.points[own]))
         own, tree = trees[int(fid)]
         tris = np.flatnonzero(face == fid)
-        pts = corners[tris].reshape(-1, 3)
-        _, k = tree.query(pts)  # start each corner at the nearest sample of the same face
-        p_uv, d = project_points(surf, pts, cloud.uv[own[k]])
-        uv[tris] = unwrap_corners(p_uv.reshape(-1, 3, 2), surf.periods)
-        dist[tris] = d.reshape(-1, 3)
+        pts = points[tris].reshape(-1, 3)
+        _, near = tree.query(pts)  # start each point at the nearest sample of the same face
+        p_uv, d = project_points(surf, pts, cloud.uv[own[near]])
+        uv[tris] = unwrap_corners(p_uv.reshape(-1, k, 2), surf.periods)
+        dist[tris] = d.reshape(-1, k)
     return uv, dist
+
+
+#: a triangle whose centroid lies within this × its longest edge of its face's surface is not tried on other faces:
+#: the faces that pass as near are the same surface (a B-spline continuing a cylinder), one triangle's sag apart
+ON_SURFACE = 0.02
 
 
 def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], faces: tuple[FaceInfo, ...],
             tolerance: float, candidates: int = 6) -> tuple[Mesh, np.ndarray]:
     """Give each triangle of a (CAD-frame) mesh the CAD face it tessellates: the faces of the samples nearest its
-    centroid are tried in order, the corners projected on each face's surface for (u,v), and the first face with
-    every corner within `tolerance` of its surface is kept (else face −1); (the mesh with face_ids, uv and faces,
-    (m, 3) corner distances to the chosen face's surface)."""
+    centroid are tried in order, the corners and centroid projected on each face's surface, and of the faces with
+    every corner within `tolerance` of their surface the one nearest the centroid is kept (else face −1): corners
+    alone do not tell a disc's triangle, its corners on the rim, from the cone or cylinder through that rim; the
+    search stops at a face whose surface passes within ON_SURFACE × the longest edge of the centroid. Returns the mesh with
+    face_ids, uv and faces, and (m, 3) corner distances to the chosen face's surface."""
     corners = mesh.corners
     m = len(corners)
-    _, near = cKDTree(cloud.points).query(corners.mean(axis=1), k=8 * candidates)
+    points = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)  # (m, 4, 3)
+    _, near = cKDTree(cloud.points).query(points[:, 3], k=8 * candidates)
     near_faces = cloud.face[near]  # (m, k) faces of the nearest samples, nearest first
     face_ids = np.full(m, -1, np.int32)
     uv = np.zeros((m, 3, 2))
     dist = np.full((m, 3), np.inf)
+    centre = np.full(m, np.inf)  # the centroid's distance to the chosen face's surface
+    enough = ON_SURFACE * np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     trees: dict[int, tuple[np.ndarray, cKDTree]] = {}
     todo = np.arange(m)
     tried = np.full((m, 1), -2, np.int64)
     for _ in range(candidates):
         if len(todo) == 0:
             break
-        # the nearest face not tried yet, per triangle still unmatched
+        # the nearest face not tried yet, per triangle still searching
         nf = near_faces[todo]
         fresh = ~(nf[:, :, None] == tried[todo][:, None, :]).any(axis=2)
         has = fresh.any(axis=1)
@@ -129,12 +164,13 @@ def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], fac
         pick = nf[has][np.arange(len(todo)), np.argmax(fresh[has], axis=1)]
         tried = np.concatenate([tried, np.full((m, 1), -2, np.int64)], axis=1)
         tried[todo, -1] = pick
-        p_uv, d = _project_faces(corners[todo], pick, cloud, surfaces, trees)
-        better = d.max(axis=1) < dist[todo].max(axis=1)
-        uv[todo[better]], dist[todo[better]] = p_uv[better], d[better]
-        ok = (d <= tolerance).all(axis=1)
-        face_ids[todo[ok]] = pick[ok]
-        todo = todo[~ok]
+        p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, trees)
+        fits = (d[:, :3] <= tolerance).all(axis=1) & (d[:, 3] < centre[todo])
+        closer = (face_ids[todo] < 0) & (d[:, :3].max(axis=1) < dist[todo].max(axis=1))  # unmatched: the nearest
+        take = fits | closer
+        uv[todo[take]], dist[todo[take]] = p_uv[take, :3], d[take, :3]
+        face_ids[todo[fits]], centre[todo[fits]] = pick[fits], d[fits, 3]
+        todo = todo[~(centre[todo] <= enough[todo])]
     out = Mesh(mesh.vertices, mesh.triangles, face_ids, uv=uv,
                faces=tuple(FaceInfo(f.id, f.surface_type, f.solid, "stl") for f in faces))
     return out, dist

@@ -6,13 +6,15 @@ only bisected there. A closed mesh stays closed."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.edge_curves import EdgeCurves
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import face_edge_table
-from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
+from amprep.geometry.core.mesh import IN_FACE, NO_TOPOLOGY, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
 from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.refine.sma import Refinement, _nearest_copy
 
@@ -30,10 +32,11 @@ def _errors(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarr
 
 def pole_vertices(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarray, vdim: np.ndarray,
                   surfaces: dict[int, Surface], faces: np.ndarray) -> dict[tuple[int, int], int]:
-    """{(vertex, face): free (u,v) coordinate} of the poles among the B-rep vertices of `faces`: a vertex whose corners
-    in the face differ in one coordinate only, and whose surface point halfway between two of them is the vertex
-    itself (a cone's apex, a sphere's pole; on a seam the point halfway is elsewhere)."""
-    r, c = np.nonzero((vdim[tris] == ON_BREP_VERTEX) & np.isin(fids, faces)[:, None])
+    """{(vertex, face): free (u,v) coordinate} of the poles among the B-rep vertices of `faces` (any vertex of a mesh
+    with no B-rep topology: a user's STL placed on its CAD): a vertex whose corners in the face differ in one
+    coordinate only, and whose surface point halfway between two of them is the vertex itself (a cone's apex, a
+    sphere's pole; on a seam the point halfway is elsewhere)."""
+    r, c = np.nonzero(np.isin(vdim[tris], (ON_BREP_VERTEX, NO_TOPOLOGY)) & np.isin(fids, faces)[:, None])
     if not len(r):
         return {}
     key = tris[r, c].astype(np.int64) * (int(fids.max()) + 1) + fids[r]  # one group per (vertex, face)
@@ -49,10 +52,39 @@ def pole_vertices(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np
         half[sel] = surfaces[int(face)].evaluate(0.5 * (lo + hi)[one_way][sel])
     at_vertex = np.linalg.norm(half - verts[v], axis=1) <= 1e-6 * (1.0 + np.abs(verts[v]).max(axis=1))
     free = np.argmax((hi - lo)[one_way], axis=1)
-    return {(int(a), int(b)): int(k) for a, b, k in zip(v[at_vertex], f[at_vertex], free[at_vertex], strict=True)}
+    found = {(int(a), int(b)): int(k) for a, b, k in zip(v[at_vertex], f[at_vertex], free[at_vertex], strict=True)}
+    same = ((hi - lo) > 1e-9).sum(axis=1) == 0  # one (u,v) in every corner (a projected STL vertex): S_u or S_v ≈ 0
+    v, f = tris[r, c][order][start][same], fids[r][order][start][same]
+    for face in np.unique(f):
+        sel = np.flatnonzero(f == face)
+        free = _degenerate_direction(surfaces[int(face)], lo[same][sel])
+        found.update(((int(v[i]), int(face)), int(k)) for i, k in zip(sel[free >= 0], free[free >= 0], strict=True))
+    return found
+
+
+def _degenerate_direction(surface: Surface, uv: np.ndarray) -> np.ndarray:
+    """(n,) 0 where S_u ≈ 0 at (n, 2) uv (u free: an apex, a pole), 1 where S_v ≈ 0, −1 elsewhere; by central
+    differences of 1e-6 × the face's (u,v) extent, ≈ 0 meaning under 1e-6 of the other direction's."""
+    span = np.ones(2) if surface.bounds is None else np.maximum(np.abs(np.diff(surface.bounds)[::2]), 1e-9)
+    h = 1e-6 * span
+    su = np.linalg.norm(surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0]), axis=1) / h[0]
+    sv = np.linalg.norm(surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]]), axis=1) / h[1]
+    return np.where(su <= 1e-6 * sv, 0, np.where(sv <= 1e-6 * su, 1, -1))
 
 
 PoleCorners = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def with_poles_centred(mesh: Mesh, faces: np.ndarray, surfaces: dict[int, Surface]) -> Mesh:
+    """The mesh with each pole corner of `faces` given the middle of its triangle's other corners in its free
+    coordinate (pole_vertices, _centre_poles): a user's STL placed on its CAD has one (u,v) per apex, which SMA's
+    (u,v) centroids and VTA's would fold about."""
+    if mesh.uv is None:
+        return mesh
+    vdim = _vertex_keys(mesh)[0]
+    poles = pole_vertices(mesh.vertices, mesh.triangles, mesh.uv, mesh.face_ids, vdim, surfaces, np.asarray(faces))
+    n_faces = int(mesh.face_ids.max()) + 1 if mesh.n_triangles else 1
+    return replace(mesh, uv=_centre_poles(mesh.uv, _pole_corners(mesh.triangles, mesh.face_ids, poles, n_faces)))
 
 
 def _pole_corners(tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
