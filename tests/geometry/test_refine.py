@@ -174,7 +174,7 @@ def test_refine_cli_on_the_users_stl_writes_it_back_in_its_frame(tmp_path):
     out, report = tmp_path / "refined.stl", tmp_path / "r.json"
     stl = corpus("voron_vhb_din_mount.stl")
     r = subprocess.run([sys.executable, "-m", "amprep", "refine", str(corpus("voron_vhb_din_mount.step")), "--stl",
-                        str(stl), "-o", str(out), "--max-chordal", "0.005", "--report", str(report),
+                        str(stl), "-o", str(out), "--max-chordal", "0.001", "--report", str(report),
                         "--out-dir", str(tmp_path / "all"), "--quiet"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     rep = json.loads(report.read_text())

@@ -92,7 +92,7 @@ def test_refine_job_returns_the_users_stl_refined_in_its_own_frame(service, tmp_
     the STL's frame, closed, with the report and the error-vs-size plot; on the heavy queue."""
     stl = corpus("voron_vhb_din_mount.stl")
     with service.client() as c:
-        job = submit(c, corpus(PART), kind="refine", params='{"method": "sma", "max_chordal": 0.005}', wait=240,
+        job = submit(c, corpus(PART), kind="refine", params='{"method": "sma", "max_chordal": 0.001}', wait=240,
                      stl=stl).json()
         assert job["status"] == "succeeded", job["error"]
         names = {a["name"]: a for a in job["artifacts"]}

@@ -100,8 +100,10 @@ def error_vs_size(comparison: dict[str, Any], path: Path) -> Path:
         row = comparison.get(key)
         if row and row.get("chordal_error"):
             ax.plot(row["file_size"] / 1024, row["chordal_error"]["mean"], style[0], c=style[1], ms=9, label=row["label"])
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    ys = np.concatenate([np.asarray(line.get_ydata(), float).ravel() for line in ax.get_lines()] or [np.zeros(0)])
+    if (ys > 0).any():  # nothing over the faces to refine (all errors 0, or none): a linear axis, not a crash
+        ax.set_xscale("log")
+        ax.set_yscale("log")
     ax.set_xlabel("binary STL size (KiB)")
     ax.set_ylabel("mean chordal error of the refined faces (mm)")
     ax.set_title("Error against file size")
