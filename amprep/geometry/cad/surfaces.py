@@ -57,6 +57,22 @@ class Surface:
         return self.surface_type == "plane"
 
 
+def uv_extent(surface: Surface) -> np.ndarray:
+    """(2,) the face's (u,v) extent (1 where unknown), the scale of tangents' difference steps."""
+    if surface.bounds is None:
+        return np.array([1.0, 1.0])
+    u1, u2, v1, v2 = surface.bounds
+    return np.array([max(u2 - u1, 1e-9), max(v2 - v1, 1e-9)])
+
+
+def tangents(surface: Surface, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(S_u, S_v) (n, 3) each at (n, 2) uv, by central differences of 1e-6 × uv_extent."""
+    h = 1e-6 * uv_extent(surface)
+    su = (surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0])) / (2 * h[0])
+    sv = (surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]])) / (2 * h[1])
+    return su, sv
+
+
 def plane(o: np.ndarray, x: np.ndarray, y: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
     """S(u,v) = O + u·X + v·Y."""
     return lambda uv: o + uv[:, :1] * x + uv[:, 1:2] * y

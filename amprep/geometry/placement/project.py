@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.surfaces import Surface, tangents, uv_extent
 from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.measure.chordal import barycentric_grid
 
@@ -39,25 +39,9 @@ class ReferenceCloud:
         return cls(np.concatenate(pts), np.concatenate(face), np.concatenate(uv))
 
 
-def _span(surface: Surface) -> np.ndarray:
-    """(2,) the face's (u,v) extent (1 where unknown), the scale of the difference steps."""
-    if surface.bounds is None:
-        return np.array([1.0, 1.0])
-    u1, u2, v1, v2 = surface.bounds
-    return np.array([max(u2 - u1, 1e-9), max(v2 - v1, 1e-9)])
-
-
-def _tangents(surface: Surface, uv: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(S_u, S_v) (n, 3) each at (n, 2) uv, by central differences of 1e-6 × span."""
-    h = 1e-6 * span
-    su = (surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0])) / (2 * h[0])
-    sv = (surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]])) / (2 * h[1])
-    return su, sv
-
-
 def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
     """(n, 3) unit normals S_u × S_v / |S_u × S_v| at (n, 2) uv; zero where the two are parallel (a pole, an apex)."""
-    su, sv = _tangents(surface, np.asarray(uv, float), _span(surface))
+    su, sv = tangents(surface, np.asarray(uv, float))
     n = np.cross(su, sv)
     size = np.linalg.norm(n, axis=1, keepdims=True)
     scale = np.linalg.norm(su, axis=1, keepdims=True) * np.linalg.norm(sv, axis=1, keepdims=True)
@@ -68,10 +52,10 @@ def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterat
     """Gauss–Newton on |S(u,v) − p|² from uv0, all points at once, derivatives by central differences:
     ((n, 2) (u,v), (n,) distance |S(u,v) − p|)."""
     uv = np.array(uv0, dtype=float)
-    span = _span(surface)
+    span = uv_extent(surface)
     for _ in range(iterations):
         s = surface.evaluate(uv)
-        su, sv = _tangents(surface, uv, span)
+        su, sv = tangents(surface, uv)
         r = s - points
         a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
         gu, gv = (su * r).sum(1), (sv * r).sum(1)
@@ -104,7 +88,7 @@ def unwrap_corners(uv: np.ndarray, periods: tuple[float | None, float | None]) -
 def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
                    trees: dict[int, tuple[np.ndarray, cKDTree]]) -> tuple[np.ndarray, np.ndarray]:
     """((m, k, 2) uv, (m, k) distance) of each triangle's k points (m, k, 3) (its corners, then its centroid)
-    projected on the surface of its given face, the periodic parameters next to the first point's."""
+    projected on the surface of its given face, the periodic parameters unwrapped together (unwrap_corners)."""
     m, k = points.shape[:2]
     uv = np.zeros((m, k, 2))
     dist = np.full((m, k), np.inf)

@@ -12,7 +12,7 @@ import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.edge_curves import EdgeCurves
-from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.surfaces import Surface, tangents
 from amprep.geometry.core.edges import face_edge_table
 from amprep.geometry.core.mesh import IN_FACE, NO_TOPOLOGY, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
 from amprep.geometry.measure.chordal import triangle_chordal_error
@@ -63,12 +63,9 @@ def pole_vertices(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np
 
 
 def _degenerate_direction(surface: Surface, uv: np.ndarray) -> np.ndarray:
-    """(n,) 0 where S_u ≈ 0 at (n, 2) uv (u free: an apex, a pole), 1 where S_v ≈ 0, −1 elsewhere; by central
-    differences of 1e-6 × the face's (u,v) extent, ≈ 0 meaning under 1e-6 of the other direction's."""
-    span = np.ones(2) if surface.bounds is None else np.maximum(np.abs(np.diff(surface.bounds)[::2]), 1e-9)
-    h = 1e-6 * span
-    su = np.linalg.norm(surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0]), axis=1) / h[0]
-    sv = np.linalg.norm(surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]]), axis=1) / h[1]
+    """(n,) 0 where S_u ≈ 0 at (n, 2) uv (u free: an apex, a pole), 1 where S_v ≈ 0, −1 elsewhere (surfaces.tangents),
+    ≈ 0 meaning under 1e-6 of the other direction's."""
+    su, sv = (np.linalg.norm(t, axis=1) for t in tangents(surface, uv))
     return np.where(su <= 1e-6 * sv, 0, np.where(sv <= 1e-6 * su, 1, -1))
 
 
