@@ -357,3 +357,51 @@ def test_a_face_of_no_width_keeps_its_edges_uncut_and_is_meshed(monkeypatch):
     monkeypatch.setattr(face_mesher, "SLIVER", -1.0)  # the rule off: cut, and the face is left unmeshed
     r = mesh_model(model, MeshParams(tolerance=0.01, mesher="quality"))
     assert r.unmeshed_faces != ()
+
+
+def test_a_circle_brepmesh_collapses_onto_its_vertex_is_cut_and_its_disc_meshed(monkeypatch):
+    """A pin's rounded end (a B-spline arc revolved) leaves a 0.05 mm disc; with the vertex's tolerance 0.5 mm (as a
+    KiCad DSUB-15's pins have) BRepMesh collapses the disc's circle onto its vertex and the disc gets no triangles.
+    The closed edge is cut in three, the disc and the round end meshed from it: every face meshed, closed, within
+    tolerance by OCCT's distance; without the cut the disc is left unmeshed."""
+    import math
+
+    from OCP.BRep import BRep_Builder, BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeRevol
+    from OCP.GC import GC_MakeArcOfCircle
+    from OCP.GeomConvert import GeomConvert
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt
+    from OCP.TopAbs import TopAbs_VERTEX
+    from OCP.TopoDS import TopoDS
+
+    from amprep.geometry.cad.topology import explore
+    from amprep.geometry.meshing import enforce
+    from tests.geometry.test_independent_distance import _worst_distance
+
+    r, big, s = 0.025, 0.15, math.sqrt(0.5)
+    f = big - r
+    arc = GC_MakeArcOfCircle(gp_Pnt(r, 0, 0), gp_Pnt(r + f * s, 0, f - f * s), gp_Pnt(big, 0, f)).Value()
+    wire = BRepBuilderAPI_MakeWire()
+    for edge in (BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 0), gp_Pnt(r, 0, 0)),
+                 BRepBuilderAPI_MakeEdge(GeomConvert.CurveToBSplineCurve_s(arc)),
+                 BRepBuilderAPI_MakeEdge(gp_Pnt(big, 0, f), gp_Pnt(big, 0, 2)),
+                 BRepBuilderAPI_MakeEdge(gp_Pnt(big, 0, 2), gp_Pnt(0, 0, 2)),
+                 BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 2), gp_Pnt(0, 0, 0))):
+        wire.Add(edge.Edge())
+    profile = BRepBuilderAPI_MakeFace(wire.Wire()).Face()
+    shape = BRepPrimAPI_MakeRevol(profile, gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), 2 * math.pi).Shape()
+    rim = [v for v in explore(shape, TopAbs_VERTEX, TopoDS.Vertex_s)
+           if abs(BRep_Tool.Pnt_s(v).Z()) < 1e-9 and abs(BRep_Tool.Pnt_s(v).X() - r) < 1e-9]
+    assert rim
+    for v in rim:
+        BRep_Builder().UpdateVertex(v, 0.5)
+    model = model_from_shape(shape)
+    res = mesh_model(model, MeshParams(tolerance=0.1))
+    assert res.fallback_faces.get(0) == "no_triangulation"  # the disc: BRepMesh gave it nothing
+    assert res.unmeshed_faces == ()
+    _closed_solid(res.mesh)
+    assert np.bincount(res.mesh.face_ids, minlength=len(model.faces)).min() > 0
+    assert _worst_distance(model, res.mesh, samples=200) <= 0.1 * 1.001
+    monkeypatch.setattr(enforce, "CLOSED_EDGE_SEGMENTS", 0)  # no cut: the disc stays without triangles
+    assert mesh_model(model, MeshParams(tolerance=0.1)).unmeshed_faces == (0,)

@@ -22,6 +22,7 @@ from amprep.geometry.meshing.face_mesher import (
     boundary_loops,
     collapse_short_edges,
     discretize_missing_edges,
+    edge_length,
     grade_edges,
     has_pole,
     mesh_face,
@@ -53,6 +54,10 @@ LOCAL_MIN_TRIANGLES = 1000
 LOCAL_MAX_BAD = 0.25
 #: re-meshing a face costs about this many triangles' time (face_pool's unit) whatever its size
 REMESH_PER_FACE = 100
+#: a closed edge (one vertex at both ends) gets at least this many segments, so a face it bounds alone has area:
+#: BRepMesh collapses a circle under its minimum size onto its vertex (KiCad's DSUB-15: a pin's 0.05 mm end disc at
+#: 0.1 mm, left with no triangles and reported unmeshed)
+CLOSED_EDGE_SEGMENTS = 3
 
 
 @dataclass
@@ -81,6 +86,9 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
     re-mesh or mend the faces over the tolerance until none is or ENFORCE_ROUNDS have run; `f` is updated."""
     prog = Progress(progress)
     todo = set(f.fallback)  # edges of faces that keep OCCT's mesh keep OCCT's discretisation; the rest from it
+    for i in _open_collapsed_loops(f, todo) - todo:
+        f.fallback[i] = "closed_edge"
+        todo.add(i)
     for round_ in range(ENFORCE_ROUNDS + 1):
         stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
         stage("re-meshing faces", 0.0)
@@ -142,6 +150,24 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew to {total:,} triangles, over the limit of "
                           f"{f.params.max_triangles:,}: use a coarser tolerance, the default mesher or a higher "
                           "max_triangles")
+
+
+def _open_collapsed_loops(f: FaceStates, faces: set[int]) -> set[int]:
+    """Cut every closed edge of `faces` (both ends one vertex, not degenerated, longer than CLOSED_EDGE_SEGMENTS ×
+    MIN_SPACING × tolerance) discretised in fewer than CLOSED_EDGE_SEGMENTS segments into that many equal parameter
+    steps; returns the faces of every edge cut, all of which must be meshed from the new discretisation."""
+    cut: set[int] = set()
+    for i in sorted(faces):
+        for edge in face_edges(f.model.faces[i]):
+            ei, v1, _, v2, _, degenerate = f.topo.edge_facts(edge)
+            params = f.topo.edge_params.get(ei)
+            if degenerate or v1 != v2 or params is None or len(params) > CLOSED_EDGE_SEGMENTS:
+                continue
+            new = np.linspace(params[0], params[-1], CLOSED_EDGE_SEGMENTS + 1)
+            if edge_length(edge, new) > CLOSED_EDGE_SEGMENTS * MIN_SPACING * f.tol:
+                f.topo.edge_params[ei] = new
+                cut |= _faces_of_edge(f.model, f.topo, ei)
+    return cut
 
 
 def _loops_to_plan(face, topo: Topology, target: float, angular: float) -> list[dict]:  # type: ignore[no-untyped-def,type-arg]

@@ -99,6 +99,11 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
             topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
 
 
+def edge_length(edge: TopoDS_Edge, params: np.ndarray) -> float:
+    """The length of an edge's discretisation at params (n,): Σ of its chords."""
+    return float(np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1).sum())
+
+
 def collapse_short_edges(faces: list[TopoDS_Face], topo: Topology, shortest: float) -> None:
     """Identify the two vertices of every edge of `faces` whose discretised length is under `shortest` (a CAD edge of
     a few µm: kept, its triangles collapse to slivers that a float32 STL makes degenerate), by topology
@@ -110,7 +115,7 @@ def collapse_short_edges(faces: list[TopoDS_Face], topo: Topology, shortest: flo
             params = topo.edge_params.get(ei)
             if degenerate or params is None or v1 == v2:
                 continue
-            if np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1).sum() < shortest:
+            if edge_length(edge, params) < shortest:
                 topo.merge_vertices(v1, v2)
                 topo.edge_params[ei] = params[[0, -1]]
 
@@ -181,7 +186,7 @@ def face_width(face: TopoDS_Face, topo: Topology) -> float:
             continue
         params = topo.edge_params.get(topo.edge_index(edge))
         if params is not None and len(params) > 1:
-            perimeter += float(np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1).sum())
+            perimeter += edge_length(edge, params)
     return 2 * abs(props.Mass()) / perimeter if perimeter > 0 else np.inf
 
 
