@@ -180,3 +180,70 @@ def test_bspline_twin_at_a_hundredth_is_closed_with_no_flat_triangle():
     c = check_mesh(r.mesh)
     assert c.closed and c.degenerate_triangles == 0 and c.volume > 0 and r.max_error <= 0.01
     assert float32_degenerate_count(r.mesh) == 0 and not r.unmeshed_faces
+
+
+def _sheared_plane():
+    """A face on the plane z = 0 parametrised as S(u,v) = (u², v, 0) on [0,1]² (a degree-2 B-spline in u): a triangle
+    counter-clockwise in (u,v) can be clockwise in space."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.gp import gp_Pnt
+    from OCP.TColgp import TColgp_Array2OfPnt
+    from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
+
+    poles = TColgp_Array2OfPnt(1, 3, 1, 2)
+    for i, x in enumerate((0.0, 0.0, 1.0)):
+        for j, y in enumerate((0.0, 1.0)):
+            poles.SetValue(i + 1, j + 1, gp_Pnt(x, y, 0.0))
+    knots, mults_u, mults_v = TColStd_Array1OfReal(1, 2), TColStd_Array1OfInteger(1, 2), TColStd_Array1OfInteger(1, 2)
+    for k, (t, mu, mv) in enumerate(((0.0, 3, 2), (1.0, 3, 2))):
+        knots.SetValue(k + 1, t)
+        mults_u.SetValue(k + 1, mu)
+        mults_v.SetValue(k + 1, mv)
+    surface = Geom_BSplineSurface(poles, knots, knots, mults_u, mults_v, 2, 1)
+    return BRepBuilderAPI_MakeFace(surface, 1e-7).Face()
+
+
+def test_a_pair_turned_over_against_each_other_in_space_is_flipped_apart():
+    """Two triangles counter-clockwise in (u,v) on a sheared parametrisation, one of them turned over in space (the
+    DTMB hull's quality mesh had 97 such pairs at 0.34 mm and 39 crossing pairs): the quality mesher's flips unfold
+    them, keeping the (u,v) orientation and the tolerance, and never fold a pair that was not."""
+    from amprep.geometry.meshing.local_refine import flip_for_angles
+    from amprep.geometry.meshing.occt_read import FacePatch
+
+    surface = surface_of(_sheared_plane())
+    # A, B; D above the diagonal AB, C below it; the unfolded pair has a smaller angle (1.3° against 11.9°), so only
+    # the unfolding flips it
+    uv = np.array([[0.0, 0.0], [1.0, 1.0], [0.211, 0.407], [0.615, 0.594]])
+    xyz = surface.evaluate(uv)
+    assert np.allclose(xyz[:, 0], uv[:, 0] ** 2) and np.allclose(xyz[:, 2], 0)
+    tris = np.array([[0, 1, 2], [0, 3, 1]])
+
+    def normals_z(t):
+        c = xyz[t]
+        return np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])[:, 2]
+
+    def uv_area(t):
+        a, b, c = uv[t[:, 0]], uv[t[:, 1]], uv[t[:, 2]]
+        return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+    assert (uv_area(tris) > 0).all() and normals_z(tris)[0] > 0 > normals_z(tris)[1]  # folded in space
+    none = np.full(4, -1, np.int64)
+    patch = FacePatch(0, xyz, uv, tris, none, none, np.full(4, np.nan), meshed_by="quality", error=np.zeros(2))
+    out = flip_for_angles(patch, surface, tolerance=0.01)
+    assert (uv_area(out.tris) > 0).all()
+    assert (normals_z(out.tris) > 0).all(), "still turned over"
+    assert sorted(map(tuple, np.sort(out.tris, axis=1))) == [(0, 2, 3), (1, 2, 3)]
+    assert (triangle_chordal_error(xyz[out.tris], uv[out.tris], surface, 6) <= 0.01).all()
+    # the unfolded pair: no flip folds it back, whatever the angles would gain
+    again = flip_for_angles(out, surface, tolerance=0.01)
+    assert (normals_z(again.tris) > 0).all()
+
+
+def test_the_dtmb_hull_quality_mesh_does_not_cross_itself():
+    """DTMB 5415's bow hull (one B-spline face whose (u,v) shears under the triangles): the quality mesher's output at
+    0.34 mm has no pair of triangles crossing each other (39 before the flips unfolded turned-over pairs)."""
+    from amprep.geometry.measure.defects import self_intersections
+
+    mesh = mesh_model(read_cad(corpus("dtmb5415_bow_hull.iges")), MeshParams(tolerance=0.34, mesher="quality")).mesh
+    assert self_intersections(mesh)[0] == 0

@@ -18,7 +18,13 @@ from amprep.geometry.cad.pcurve_shifts import ordered_edges
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
-from amprep.geometry.meshing.local_refine import flip_flat_triangles, flip_for_angles, refine_patch, smooth_on_surface
+from amprep.geometry.meshing.local_refine import (
+    flip_flat_triangles,
+    flip_for_angles,
+    refine_patch,
+    smooth_on_surface,
+    unfold,
+)
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
@@ -416,6 +422,8 @@ def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface
                                                   tolerance, order), surface, tolerance, order)
     elif quality and surface.surface_type not in ANALYTIC:  # one scale only approximates the surface's lengths
         patch = flip_for_angles(patch, surface, tolerance, order)
+    elif not surface.affine:
+        patch = unfold(patch, surface, tolerance, order)
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
 
 
