@@ -38,6 +38,7 @@ from amprep.geometry.refine.compare import (
     select_faces,
     topology_issues,
 )
+from amprep.geometry.refine.face_domain import FaceDomains
 from amprep.geometry.refine.limit_surface import LimitSurface, remesh_to_edge
 from amprep.jobs.common import input_of, is_cad, model_info, provenance, read_mesh, sha256_file
 
@@ -161,7 +162,8 @@ def _refine_and_report(model: CadModel, mesh: Mesh, surfaces: dict[int, Surface]
     worst = max((before[f].chordal_error.max if before[f].chordal_error else 0.0 for f in faces), default=0.0)
     target = params.target if params.target is not None else (0.1 * worst if worst > 0 else 1.0)
     prog("refining", 0.45)
-    ref = refine_faces(params.method, mesh, faces, surfaces, params, params.iterations, curves, target)
+    ref = refine_faces(params.method, mesh, faces, surfaces, params, params.iterations, curves, target,
+                       FaceDomains(model, target))
     out = ref.mesh
     prog("scoring", 0.55)
     analysis = analyze_mesh(out, ap, surfaces, n_faces, info, None, prog.span(0.55, 0.6))

@@ -336,3 +336,44 @@ def test_adaptive_on_real_edges_that_wrap_a_periodic_face_and_stray_from_their_p
     on = out.vertex_dim == ON_BREP_EDGE
     pairs = np.stack([out.vertex_entity[on], out.vertex_param[on]], axis=1)
     assert len(np.unique(pairs, axis=0)) == len(pairs)
+
+
+def test_adaptive_puts_no_point_beyond_a_faces_trim():
+    """A cylinder r = 10 cut by a plane tilted 30°: the side face's (u,v) boundary at the cut is a cosine, concave
+    where it dips, so an edge between two of its 0.5 mm mesh's nodes can have its (u,v) midpoint beyond the trim (CTC-02's
+    mitred fillets: such points crossed the next fillet's triangles, 29 pairs). With the face's domain no new vertex
+    is off the solid (OCCT's distance); without it some are."""
+    import math
+
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeVertex, BRepBuilderAPI_Transform
+    from OCP.BRepExtrema import BRepExtrema_DistShapeShape
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax1, gp_Ax2, gp_Dir, gp_Pnt, gp_Trsf
+
+    from amprep.geometry.refine.adaptive import adaptive_refine
+    from amprep.geometry.refine.face_domain import FaceDomains
+
+    cylinder = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), 10, 100).Shape()
+    tilt = gp_Trsf()
+    tilt.SetRotation(gp_Ax1(gp_Pnt(0, 0, 80), gp_Dir(0, 1, 0)), math.radians(30))
+    cutter = BRepBuilderAPI_Transform(BRepPrimAPI_MakeBox(gp_Pnt(-50, -50, 80), 100, 100, 100).Shape(), tilt).Shape()
+    shape = BRepAlgoAPI_Cut(cylinder, cutter).Shape()
+    model = model_from_shape(shape)
+    mesh = mesh_model(model, MeshParams(tolerance=0.5)).mesh
+    side = [i for i, f in enumerate(mesh.faces) if f.surface_type == "cylinder"]
+    assert len(side) == 1
+    surfaces = {side[0]: surface_of(model.faces[side[0]])}
+
+    def off_the_solid(refined):
+        count = 0
+        for p in refined.vertices[mesh.n_vertices:]:
+            vertex = BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, p))).Vertex()
+            count += BRepExtrema_DistShapeShape(vertex, shape).Value() > 1e-6
+        return count
+
+    kept = adaptive_refine(mesh, side, surfaces, 0.01, domain=FaceDomains(model, 0.01)).mesh
+    assert kept.n_triangles > 5 * mesh.n_triangles
+    assert off_the_solid(kept) == 0
+    assert check_mesh(kept).closed
+    assert off_the_solid(adaptive_refine(mesh, side, surfaces, 0.01).mesh) > 0

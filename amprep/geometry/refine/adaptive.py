@@ -16,6 +16,7 @@ from amprep.geometry.cad.surfaces import Surface, tangents
 from amprep.geometry.core.edges import face_edge_table
 from amprep.geometry.core.mesh import IN_FACE, NO_TOPOLOGY, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
 from amprep.geometry.measure.chordal import triangle_chordal_error
+from amprep.geometry.refine.face_domain import FaceDomains
 from amprep.geometry.refine.sma import Refinement, _nearest_copy
 
 
@@ -169,12 +170,15 @@ def _on_both_faces(curves: EdgeCurves, hit: tuple[int, float], rows: np.ndarray,
 
 def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Surface], target: float,
                     max_triangles: int = 10_000_000, order: int = 6, max_rounds: int = 40,
-                    curves: EdgeCurves | None = None, by_sagitta: bool = True) -> Refinement:
+                    curves: EdgeCurves | None = None, by_sagitta: bool = True,
+                    domain: FaceDomains | None = None) -> Refinement:
     """Split the triangles of `faces` whose chordal error exceeds `target` until none does, `max_rounds` pass or the
     next round would exceed max_triangles. With `curves` (the B-rep edges of a CAD tessellation) a contour edge is
     split on both sides, its new vertex on the exact B-rep edge and on each face's pcurve; without, contour edges
     stay whole and a triangle whose error is its contour edge's own sagitta is left as it is. The edge split is
-    the one whose midpoint lies farthest from the surface (by_sagitta; the longest in 3D otherwise)."""
+    the one whose midpoint lies farthest from the surface (by_sagitta; the longest in 3D otherwise). With `domain`
+    an inner edge whose (u,v) midpoint lies off its face's trimmed domain is never split (its point would be on the
+    surface's extension, beyond the face)."""
     if mesh.uv is None:
         raise AmprepError(ErrorCode.INVALID_PARAMETER, "adaptive refinement needs the (u,v) of every triangle corner")
     if not target > 0:
@@ -185,6 +189,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     parent = np.arange(mesh.n_triangles)
     chosen = np.isin(fids, faces)
     unsplittable: set[tuple[int, int]] = set()  # contour edges with no B-rep edge behind them, or whose pcurves miss it
+    outside: set[int] = set()  # inner edges (pair codes) whose (u,v) midpoint is off their face's trimmed domain
     tol = 0.5 * target  # how far a pcurve's point may lie from the 3D edge's for the split to be taken
     poles = pole_vertices(verts, tris, uvs, fids, vdim, surfaces, faces)
     n_faces = int(fids.max()) + 1 if len(fids) else 1
@@ -207,22 +212,17 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         length = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)  # edge s: corner s → s+1
         own_mid = _mid_uv(uvs, pole)  # (m, 3, 2)
         weight = _edge_sagitta(corners, own_mid, fids, chosen, surfaces) if by_sagitta else length
-        score = np.where(splittable & (length > 0), weight + 1e-12 * length, -1.0)  # ties: the longer edge
-        cand = score.argmax(axis=1)
-        has_cand = score.max(axis=1) >= 0
-        rows = np.arange(len(tris))
         floor = _contour_sagitta(corners, uvs, fids, ~(inner | on_curve)[edge_id] & chosen[:, None], surfaces)
-        marked = chosen & (err > np.maximum(target, floor * (1 + 1e-9))) & has_cand
+        while True:  # a triangle with a side whose midpoint leaves its face's trim is not split; choose again
+            free = splittable & ~_pairs_in(tris, outside).any(axis=1)[:, None]
+            cand, has_cand, marked, split = _choose(free, weight + 1e-12 * length, length, err,
+                                                    np.maximum(target, floor * (1 + 1e-9)), chosen, edge_id, len(inner))
+            leaving = _leaving(domain, split & inner, edge_id, tris, own_mid, fids, surfaces) if marked.any() else set()
+            if not leaving:
+                break
+            outside |= leaving
         if not marked.any():
             break
-        split = np.zeros(len(inner), bool)
-        split[edge_id[rows[marked], cand[marked]]] = True
-        while True:  # closure: a chosen triangle with any split edge also splits its own longest splittable edge
-            touched = split[edge_id].any(axis=1) & has_cand
-            need = edge_id[rows[touched], cand[touched]]
-            if split[need].all():
-                break
-            split[need] = True
         edge_split = split[edge_id]  # (m, 3)
         n_split = edge_split.sum(axis=1)
         if len(tris) + int(n_split.sum()) > max_triangles:
@@ -247,6 +247,55 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
                    vent if mesh.vertex_entity is not None else None, vpar if mesh.vertex_param is not None else None,
                    mesh.faces)
     return Refinement(refined, {}, parent[order_])
+
+
+_PAIR = np.int64(1) << 31
+
+
+def _pairs_in(tris: np.ndarray, codes: set[int]) -> np.ndarray:
+    """(m, 3) bool: triangle side s (corners s, s+1) is one of the vertex pairs `codes` (min·2³¹ + max)."""
+    if not codes:
+        return np.zeros(tris.shape, bool)
+    a, b = tris, np.roll(tris, -1, axis=1)
+    return np.isin(np.minimum(a, b) * _PAIR + np.maximum(a, b), np.fromiter(codes, np.int64, len(codes)))
+
+
+def _choose(free: np.ndarray, score: np.ndarray, length: np.ndarray, err: np.ndarray, over: np.ndarray,
+            chosen: np.ndarray, edge_id: np.ndarray, n_edges: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(cand (m,), has_cand (m,), marked (m,), split (edges,)): each triangle's best splittable side (`free` (m, 3),
+    `score` (m, 3)), the chosen triangles over `over` (m,) with one, and the edges split: theirs, closed so that a
+    chosen triangle with any split side also splits its own best."""
+    score = np.where(free & (length > 0), score, -1.0)
+    cand = score.argmax(axis=1)
+    has_cand = score.max(axis=1) >= 0
+    marked = chosen & (err > over) & has_cand
+    rows = np.arange(len(edge_id))
+    split = np.zeros(n_edges, bool)
+    split[edge_id[rows[marked], cand[marked]]] = True
+    while True:
+        touched = split[edge_id].any(axis=1) & has_cand
+        need = edge_id[rows[touched], cand[touched]]
+        if split[need].all():
+            break
+        split[need] = True
+    return cand, has_cand, marked, split
+
+
+def _leaving(domain: FaceDomains | None, split: np.ndarray, edge_id: np.ndarray, tris: np.ndarray,
+             own_mid: np.ndarray, fids: np.ndarray, surfaces: dict[int, Surface]) -> set[int]:
+    """Pair codes of the split edges (`split` (edges,) bool) whose (u,v) midpoint, from their first triangle, lies
+    off its face's trimmed domain."""
+    if domain is None or not split.any():
+        return set()
+    r, c = np.nonzero(split[edge_id])
+    _, first = np.unique(edge_id[r, c], return_index=True)
+    r, c = r[first], c[first]
+    off = np.zeros(len(r), bool)
+    for f in np.unique(fids[r]):
+        k = fids[r] == f
+        off[k] = ~domain.inside(int(f), own_mid[r[k], c[k]], surfaces[int(f)].periods)
+    a, b = tris[r[off], c[off]], tris[r[off], (c[off] + 1) % 3]
+    return set((np.minimum(a, b) * _PAIR + np.maximum(a, b)).tolist())
 
 
 def _vertex_keys(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
