@@ -417,6 +417,13 @@ def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface
                                 np.concatenate([node_edge, np.full(k, -1, np.int64)]),
                                 np.concatenate([node_param, np.full(k, np.nan)]), meshed_by=method, error=err)
         patch = refined
+    return _finish(patch, surface, tolerance, order, quality, local, min_area)
+
+
+def _finish(patch: FacePatch, surface: Surface, tolerance: float, order: int, quality: bool, local: bool,
+            min_area: float) -> FacePatch:
+    """A face's mesh finished on its surface: the quality mesher's flips (and smoothing, on a face with no single
+    scale), else the unfolding flips alone; then flat triangles flipped away."""
     if quality and local:
         patch = flip_for_angles(smooth_on_surface(flip_for_angles(patch, surface, tolerance, order), surface,
                                                   tolerance, order), surface, tolerance, order)
