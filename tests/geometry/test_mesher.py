@@ -405,3 +405,30 @@ def test_a_circle_brepmesh_collapses_onto_its_vertex_is_cut_and_its_disc_meshed(
     assert _worst_distance(model, res.mesh, samples=200) <= 0.1 * 1.001
     monkeypatch.setattr(enforce, "CLOSED_EDGE_SEGMENTS", 0)  # no cut: the disc stays without triangles
     assert mesh_model(model, MeshParams(tolerance=0.1)).unmeshed_faces == (0,)
+
+
+def test_a_cap_of_three_nodes_on_one_line_is_split_into_its_neighbour():
+    """A degenerate triangle whose middle corner lies on its longest side (three nodes of one straight edge that a
+    face's (u,v) Delaunay joined: FreeCAD's SOD_323 quality mesh had two) is folded into the neighbour across that
+    side: no degenerate triangle, the same boundary, orientation and area; left where the neighbour is another face's."""
+    from amprep.geometry.core.mesh import FaceInfo, Mesh
+    from amprep.geometry.meshing.weld import split_caps
+
+    a, c, b, d, e = (0, 0, 0), (2, 0, 0), (1, 0, 0), (1, 1, 0), (1, -1, 0)
+    vertices = np.array([a, c, b, d, e], float)
+    tris = np.array([[0, 1, 2], [1, 0, 3], [0, 2, 4], [2, 1, 4]])  # the cap, its neighbour across a–c, two below
+    uv = vertices[tris][..., :2].copy()
+
+    def mesh_of(face_ids):
+        return Mesh(vertices, tris, np.array(face_ids, np.int32), uv,
+                    faces=tuple(FaceInfo(i, "plane") for i in range(max(face_ids) + 1)))
+
+    before = check_mesh(mesh_of([0, 0, 0, 0]))
+    assert before.degenerate_triangles == 1 and before.misoriented_edges == 0
+    out = split_caps(mesh_of([0, 0, 0, 0]))
+    after = check_mesh(out)
+    assert after.degenerate_triangles == 0 and after.misoriented_edges == 0 and after.nonmanifold_edges == 0
+    assert after.boundary_edges == before.boundary_edges and np.isclose(after.area, before.area)
+    assert sorted(map(tuple, np.sort(out.triangles[:2], axis=1))) == [(0, 2, 3), (1, 2, 3)]
+    assert np.allclose(out.uv[..., 0], out.vertices[out.triangles][..., 0])  # each corner keeps its own (u,v)
+    assert check_mesh(split_caps(mesh_of([0, 1, 0, 0]))).degenerate_triangles == 1  # the neighbour is another face's

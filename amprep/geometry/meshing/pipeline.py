@@ -29,7 +29,7 @@ from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import Prepared, prepare
 from amprep.geometry.meshing.read_ahead import read_and_prepare_ahead
 from amprep.geometry.meshing.tolerance import bbox_diagonal
-from amprep.geometry.meshing.weld import orient_stored_shells, weld
+from amprep.geometry.meshing.weld import orient_stored_shells, split_caps, weld
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,7 +131,7 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
         for i in range(n_faces)
     )
     prog("welding", 0.95)
-    mesh = orient_stored_shells(weld([p for p in patches if p is not None], infos, topo.vertex_roots()))
+    mesh = split_caps(orient_stored_shells(weld([p for p in patches if p is not None], infos, topo.vertex_roots())))
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))), prepared.estimated)

@@ -4,6 +4,8 @@ which is how their file shares its coordinate list."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
@@ -153,3 +155,43 @@ def orient_stored_shells(mesh: Mesh) -> Mesh:
                 uv[sel] = uv[sel][:, [0, 2, 1]]
             flipped = True
     return mesh.with_arrays(triangles=tris, uv=uv) if flipped else mesh
+
+
+def split_caps(mesh: Mesh) -> Mesh:
+    """The mesh with each cap folded into the neighbour across its longest side, in the same face: a degenerate
+    triangle (checks.degenerate_mask) (a, c, b) whose corner b lies between a and c (three nodes of one straight
+    edge, an ear a face's (u,v) Delaunay keeps where the edge is curved in (u,v); flat once welded) and the
+    neighbour (c, a, d) become (c, b, d) and (b, a, d), which split the neighbour at b: the same surface, the cap's
+    two other sides kept with their directions, so the mesh stays closed and oriented; a cap whose neighbour is
+    missing, in another face, another cap's or flat itself is left."""
+    from amprep.geometry.core.checks import degenerate_mask
+
+    caps = np.flatnonzero(degenerate_mask(mesh))
+    if not len(caps) or mesh.n_triangles < 2:
+        return mesh
+    tris, uv, v = mesh.triangles.copy(), None if mesh.uv is None else mesh.uv.copy(), mesh.vertices
+    n = np.int64(mesh.n_vertices)
+    directed = (tris.astype(np.int64) * n + np.roll(tris, -1, axis=1)).ravel()  # side k of t: t·3 + k, corner k → k+1
+    order = np.argsort(directed, kind="stable")
+    used: set[int] = set()
+    for t in caps.tolist():
+        c = v[tris[t]]
+        k = int(np.argmax(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1)))  # the longest side: corners k, k+1
+        a, cc, b = (int(tris[t, (k + j) % 3]) for j in range(3))
+        along = float(np.dot(v[b] - v[a], v[cc] - v[a]) / max(float(np.dot(v[cc] - v[a], v[cc] - v[a])), 1e-300))
+        i = np.searchsorted(directed[order], cc * n + a)
+        if not (0 < along < 1) or i >= len(order) or directed[order[i]] != cc * n + a or t in used:
+            continue
+        nb, j = divmod(int(order[i]), 3)  # the neighbour's side j runs c → a; its corner j + 2 is d
+        d = int(tris[nb, (j + 2) % 3])
+        new = np.array([[cc, b, d], [b, a, d]])
+        area = np.linalg.norm(np.cross(v[new[:, 1]] - v[new[:, 0]], v[new[:, 2]] - v[new[:, 0]]), axis=1)
+        if (nb in used or mesh.face_ids[nb] != mesh.face_ids[t] or d in (a, b, cc)
+                or not (area > 1e-9 * float(np.dot(v[cc] - v[a], v[cc] - v[a]))).all()):
+            continue
+        used.update((t, nb))
+        tris[t], tris[nb] = new
+        if uv is not None:
+            uc, ua, ub, ud = uv[nb, j], uv[nb, (j + 1) % 3], uv[t, (k + 2) % 3], uv[nb, (j + 2) % 3]
+            uv[t], uv[nb] = np.stack([uc, ub, ud]), np.stack([ub, ua, ud])
+    return replace(mesh, triangles=tris, uv=uv) if used else mesh
