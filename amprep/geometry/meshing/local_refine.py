@@ -248,7 +248,8 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         new1, new2 = np.stack([a, tris[t2, (k2 + 2) % 3], c], axis=1), np.stack([tris[t2, (k2 + 2) % 3], b, c], axis=1)
         angle1, angle2 = min_angles(xyz[new1]), min_angles(xyz[new2])
         gain = np.minimum(angle1, angle2) - np.minimum(angle[t1], angle[t2])
-        fold_old = np.einsum("ij,ij->i", _unit_normals(xyz[tris[t1]]), _unit_normals(xyz[tris[t2]]))
+        normal = _unit_normals(xyz[tris])
+        fold_old = np.einsum("ij,ij->i", normal[t1], normal[t2])
         fold_new = np.einsum("ij,ij->i", _unit_normals(xyz[new1]), _unit_normals(xyz[new2]))
         # a pair folded against each other in space is unfolded first, whatever the angles; no flip folds a pair
         repair = (fold_old < FOLD_COS) & (fold_new > fold_old)

@@ -4,8 +4,6 @@ which is how their file shares its coordinate list."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
@@ -194,4 +192,4 @@ def split_caps(mesh: Mesh) -> Mesh:
         if uv is not None:
             uc, ua, ub, ud = uv[nb, j], uv[nb, (j + 1) % 3], uv[t, (k + 2) % 3], uv[nb, (j + 2) % 3]
             uv[t], uv[nb] = np.stack([uc, ub, ud]), np.stack([ub, ua, ud])
-    return replace(mesh, triangles=tris, uv=uv) if used else mesh
+    return mesh.with_arrays(triangles=tris, uv=uv) if used else mesh

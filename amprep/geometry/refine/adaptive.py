@@ -6,14 +6,12 @@ only bisected there. A closed mesh stays closed."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.edge_curves import EdgeCurves
 from amprep.geometry.cad.surfaces import Surface, tangents
-from amprep.geometry.core.edges import face_edge_table
+from amprep.geometry.core.edges import edge_codes, face_edge_table
 from amprep.geometry.core.mesh import IN_FACE, NO_TOPOLOGY, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
 from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.refine.face_domain import FaceDomains
@@ -82,7 +80,7 @@ def with_poles_centred(mesh: Mesh, faces: np.ndarray, surfaces: dict[int, Surfac
     vdim = _vertex_keys(mesh)[0]
     poles = pole_vertices(mesh.vertices, mesh.triangles, mesh.uv, mesh.face_ids, vdim, surfaces, np.asarray(faces))
     n_faces = int(mesh.face_ids.max()) + 1 if mesh.n_triangles else 1
-    return replace(mesh, uv=_centre_poles(mesh.uv, _pole_corners(mesh.triangles, mesh.face_ids, poles, n_faces)))
+    return mesh.with_arrays(uv=_centre_poles(mesh.uv, _pole_corners(mesh.triangles, mesh.face_ids, poles, n_faces)))
 
 
 def _pole_corners(tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
@@ -213,11 +211,12 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         own_mid = _mid_uv(uvs, pole)  # (m, 3, 2)
         weight = _edge_sagitta(corners, own_mid, fids, chosen, surfaces) if by_sagitta else length
         floor = _contour_sagitta(corners, uvs, fids, ~(inner | on_curve)[edge_id] & chosen[:, None], surfaces)
+        sides = edge_codes(tris, _PAIR)  # (m, 3) vertex-pair codes, fixed across rounds (outside keeps them)
         while True:  # a triangle with a side whose midpoint leaves its face's trim is not split; choose again
-            free = splittable & ~_pairs_in(tris, outside).any(axis=1)[:, None]
+            free = splittable & ~np.isin(sides, np.fromiter(outside, np.int64, len(outside))).any(axis=1)[:, None]
             cand, has_cand, marked, split = _choose(free, weight + 1e-12 * length, length, err,
                                                     np.maximum(target, floor * (1 + 1e-9)), chosen, edge_id, len(inner))
-            leaving = _leaving(domain, split & inner, edge_id, tris, own_mid, fids, surfaces) if marked.any() else set()
+            leaving = _leaving(domain, split & inner, edge_id, sides, own_mid, fids, surfaces) if marked.any() else set()
             if not leaving:
                 break
             outside |= leaving
@@ -249,15 +248,8 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     return Refinement(refined, {}, parent[order_])
 
 
-_PAIR = np.int64(1) << 31
-
-
-def _pairs_in(tris: np.ndarray, codes: set[int]) -> np.ndarray:
-    """(m, 3) bool: triangle side s (corners s, s+1) is one of the vertex pairs `codes` (min·2³¹ + max)."""
-    if not codes:
-        return np.zeros(tris.shape, bool)
-    a, b = tris, np.roll(tris, -1, axis=1)
-    return np.isin(np.minimum(a, b) * _PAIR + np.maximum(a, b), np.fromiter(codes, np.int64, len(codes)))
+#: edge_codes' base for vertex pairs kept across rounds (vertex ids grow, codes must not change)
+_PAIR = 1 << 31
 
 
 def _choose(free: np.ndarray, score: np.ndarray, length: np.ndarray, err: np.ndarray, over: np.ndarray,
@@ -281,10 +273,10 @@ def _choose(free: np.ndarray, score: np.ndarray, length: np.ndarray, err: np.nda
     return cand, has_cand, marked, split
 
 
-def _leaving(domain: FaceDomains | None, split: np.ndarray, edge_id: np.ndarray, tris: np.ndarray,
+def _leaving(domain: FaceDomains | None, split: np.ndarray, edge_id: np.ndarray, sides: np.ndarray,
              own_mid: np.ndarray, fids: np.ndarray, surfaces: dict[int, Surface]) -> set[int]:
-    """Pair codes of the split edges (`split` (edges,) bool) whose (u,v) midpoint, from their first triangle, lies
-    off its face's trimmed domain."""
+    """The codes (`sides` (m, 3), edge_codes) of the split edges (`split` (edges,) bool) whose (u,v) midpoint, from
+    their first triangle, lies off its face's trimmed domain."""
     if domain is None or not split.any():
         return set()
     r, c = np.nonzero(split[edge_id])
@@ -294,8 +286,7 @@ def _leaving(domain: FaceDomains | None, split: np.ndarray, edge_id: np.ndarray,
     for f in np.unique(fids[r]):
         k = fids[r] == f
         off[k] = ~domain.inside(int(f), own_mid[r[k], c[k]], surfaces[int(f)].periods)
-    a, b = tris[r[off], c[off]], tris[r[off], (c[off] + 1) % 3]
-    return set((np.minimum(a, b) * _PAIR + np.maximum(a, b)).tolist())
+    return set(sides[r[off], c[off]].tolist())
 
 
 def _vertex_keys(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

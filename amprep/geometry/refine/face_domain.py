@@ -26,27 +26,29 @@ class FaceDomains:
     def __init__(self, model: CadModel, tolerance: float) -> None:
         self.model, self.tolerance = model, min(tolerance, CHORD)
         self.topo = Topology.of(model.shape)
-        self._loops: dict[int, list[np.ndarray] | None] = {}
+        self._loops: dict[int, tuple[list[np.ndarray], np.ndarray] | None] = {}
 
-    def loops(self, face: int) -> list[np.ndarray] | None:
-        """The face's wires as (n, 2) polygons in (u,v); None where a wire cannot be walked."""
+    def loops(self, face: int) -> tuple[list[np.ndarray], np.ndarray] | None:
+        """The face's wires as (n, 2) polygons in (u,v) and their (u,v) box's middle (2,); None where a wire cannot
+        be walked."""
         if face not in self._loops:
             try:
                 found = [lp["uv"] for lp in boundary_loops(self.model.faces[face], self.topo, self.tolerance,
                                                            MeshParams.angular)]
             except AmprepError:
                 found = []
-            self._loops[face] = [lp for lp in found if len(lp) >= 3] or None
+            found = [lp for lp in found if len(lp) >= 3]
+            every = np.concatenate(found) if found else None
+            self._loops[face] = None if every is None else (found, (every.min(axis=0) + every.max(axis=0)) / 2)
         return self._loops[face]
 
     def inside(self, face: int, uv: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
         """(k,) bool: the points uv (k, 2) inside the face's trimmed domain (even-odd over its loops), each periodic
         parameter first moved by whole periods next to the loops' middle; all True where the loops are unknown."""
-        loops = self.loops(face)
-        if loops is None:
+        known = self.loops(face)
+        if known is None:
             return np.ones(len(uv), bool)
-        every = np.concatenate(loops)
-        middle = (every.min(axis=0) + every.max(axis=0)) / 2
+        loops, middle = known
         pts = np.array(uv, float)
         for d, per in enumerate(periods):
             if per:
