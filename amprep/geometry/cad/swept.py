@@ -11,6 +11,7 @@ from OCP.GeomConvert import GeomConvert
 
 from amprep.geometry.cad.bspline import basis_functions, find_span
 from amprep.geometry.cad.occt_arrays import array1, vec
+from amprep.geometry.core.vectors import cross
 
 Curve = Callable[[np.ndarray], np.ndarray]  # (N,) parameters → (N, 3) points
 
@@ -67,7 +68,7 @@ def revolution(axis_point: np.ndarray, axis_dir: np.ndarray, curve: Curve) -> Ca
     def f(uv: np.ndarray) -> np.ndarray:
         p = curve(uv[:, 1]) - axis_point
         cu, su = np.cos(uv[:, :1]), np.sin(uv[:, :1])
-        return axis_point + p * cu + np.cross(k, p) * su + k * (p @ k)[:, None] * (1 - cu)
+        return axis_point + p * cu + cross(k, p) * su + k * (p @ k)[:, None] * (1 - cu)
     return f
 
 

@@ -10,16 +10,17 @@ from scipy.sparse.csgraph import connected_components
 
 from amprep.geometry.core.edges import EdgeIncidence, edge_incidence
 from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.core.vectors import cross, norms, triangle_normals
 
 
 def triangle_areas(corners: np.ndarray) -> np.ndarray:
     """(m,) area = |(b − a) × (c − a)| / 2 of (m, 3, 3) corners."""
-    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    return 0.5 * norms(triangle_normals(corners))
 
 
 def signed_volume(corners: np.ndarray) -> float:
     """V = Σ a · (b × c) / 6 over (m, 3, 3) corners (positive for a closed, outward-oriented mesh)."""
-    return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
+    return float(np.einsum("ij,ij->i", corners[:, 0], cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
 
 
 @dataclass(frozen=True)
@@ -146,8 +147,8 @@ def winding_numbers(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
     for i in range(0, len(points), block):
         d = corners[None, :, :, :] - points[i:i + block, None, None, :]  # (p, T, 3, 3)
         a, b, c = d[:, :, 0], d[:, :, 1], d[:, :, 2]
-        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
-        num = np.einsum("ptk,ptk->pt", a, np.cross(b, c))
+        la, lb, lc = (norms(x) for x in (a, b, c))
+        num = np.einsum("ptk,ptk->pt", a, cross(b, c))
         den = (la * lb * lc + np.einsum("ptk,ptk->pt", a, b) * lc + np.einsum("ptk,ptk->pt", b, c) * la
                + np.einsum("ptk,ptk->pt", c, a) * lb)
         out[i:i + block] = 2 * np.arctan2(num, den).sum(axis=1) / (4 * np.pi)
@@ -162,7 +163,7 @@ def inside_out_shells(mesh: Mesh, labels: np.ndarray, shells: int, inc: EdgeInci
         return 0
     corners = mesh.corners
     vol = np.zeros(shells)
-    np.add.at(vol, labels, np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])) / 6.0)
+    np.add.at(vol, labels, np.einsum("ij,ij->i", corners[:, 0], cross(corners[:, 1], corners[:, 2])) / 6.0)
     open_tri = (inc.count[inc.edge_of] != 2).any(axis=1)
     has_open = np.zeros(shells, bool)
     has_open[labels[open_tri]] = True

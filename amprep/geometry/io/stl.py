@@ -9,21 +9,15 @@ import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.core.mesh import Mesh
+from amprep.geometry.core.vectors import unit_normals
 
 _BINARY = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
-
-
-def triangle_normals(corners: np.ndarray) -> np.ndarray:
-    """(m, 3) unit n = (b − a) × (c − a) / |…| of (m, 3, 3) corners; zero for a zero-area triangle."""
-    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
 
 
 def stl_bytes(mesh: Mesh, ascii: bool = False, header: str = "amprep") -> bytes:
     """The mesh as STL: binary (80-byte header, float32) or ASCII (`solid <header>` … `endsolid`)."""
     corners = mesh.corners
-    normals = triangle_normals(corners)
+    normals = unit_normals(corners)[0]
     if ascii:
         rows = np.concatenate([normals[:, None, :], corners], axis=1).reshape(-1, 12)
         body = "".join(
@@ -59,7 +53,7 @@ def write_stl(mesh: Mesh, path: str | Path, ascii: bool = False, header: str = "
     corners = mesh.corners
     with Path(path).open("wb") as fh:
         fh.write(_binary_head(mesh, header))
-        _binary_records(corners, triangle_normals(corners)).tofile(fh)
+        _binary_records(corners, unit_normals(corners)[0]).tofile(fh)
 
 
 def _index(corners: np.ndarray) -> Mesh:

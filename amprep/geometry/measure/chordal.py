@@ -11,6 +11,7 @@ from amprep.geometry.cad import bspline as _bspline
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.compiled import compiled, use_compiled
 from amprep.geometry.core.progress import checkpoint
+from amprep.geometry.core.vectors import norms, unit_normals
 
 _CHUNK_POINTS = 1_000_000
 #: triangles per call of a compiled kernel (~0.1 s of a B-spline face at order 6 here): checkpoint() between calls
@@ -127,7 +128,7 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
     """(m,) max_i |S(u_i, v_i) − c_i| over the corners: the exact bound of ε_T when S is affine in (u,v) (a plane),
     since every S(Σ w_i uv_i) − (plane of T) = Σ w_i (S(uv_i) − c_i) · n̂."""
     exact = evaluate(uv.reshape(-1, 2)).reshape(-1, 3, 3)
-    return np.linalg.norm(exact - corners, axis=2).max(axis=1)
+    return norms(exact - corners).max(axis=1)
 
 
 def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray,
@@ -195,9 +196,7 @@ def triangle_chordal_error(
         fast = _compiled(surface, corners, uv, _interior_first(order) if stop < np.inf else w, stop)
         if fast is not None:
             return fast
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    norm = np.linalg.norm(normal, axis=1)
-    unit = np.divide(normal, norm[:, None], out=np.zeros_like(normal), where=norm[:, None] > 0)
+    unit = unit_normals(corners)[0]
     out = np.empty(m)
     step = max(1, _CHUNK_POINTS // len(w))
     for s in range(0, m, step):

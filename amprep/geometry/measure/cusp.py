@@ -10,17 +10,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from amprep.geometry.core import vectors
 from amprep.geometry.core.progress import ProgressFn
 
 HORIZONTAL_COS = 1.0 - 1e-9  # |n̂·b̂| above this: a horizontal facet, printed flat, no stair step
 
 
 def unit_normals(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """((m, 3) unit normals (0 for zero-area), (m,) areas) of (m, 3, 3) corners, by (b − a) × (c − a)."""
-    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    norm = np.linalg.norm(n, axis=1)
-    unit = np.divide(n, norm[:, None], out=np.zeros_like(n), where=norm[:, None] > 0)
-    return unit, 0.5 * norm
+    """((m, 3) unit normals (0 for zero-area), (m,) areas) of (m, 3, 3) corners (vectors.unit_normals)."""
+    unit, length = vectors.unit_normals(corners)
+    return unit, 0.5 * length
 
 
 def approximate(corners: np.ndarray, layer: float, build_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -46,9 +45,9 @@ def _basis(b: np.ndarray) -> np.ndarray:
     """(3, 3) rows e1, e2, b̂: a right-handed frame whose third axis is the build direction."""
     b = b / np.linalg.norm(b)
     helper = np.eye(3)[np.argmin(np.abs(b))]
-    e1 = np.cross(helper, b)
+    e1 = vectors.cross(helper, b)
     e1 /= np.linalg.norm(e1)
-    return np.stack([e1, np.cross(b, e1), b])
+    return np.stack([e1, vectors.cross(b, e1), b])
 
 
 def point_cloud(corners: np.ndarray, density: float, max_points: int = 2_000_000,
@@ -164,7 +163,7 @@ def bounding_box(corners: np.ndarray, layer: float, build_dir: np.ndarray, densi
     e -= np.outer(e @ b, b)
     length = np.linalg.norm(e, axis=1)
     e /= length[:, None]
-    side = np.cross(b, e)  # horizontal, ⟂ P1P2
+    side = vectors.cross(b, e)  # horizontal, ⟂ P1P2
     # two boxes per segment: box j < ns on the +side, j ≥ ns on the −side; local axes (e, ±side, b), origin P1
     # A point in layer k (z_k ≤ z < z_k + t) can only lie in boxes of slice k: the points are hashed by (layer, 2D
     # cell of the slice plane) and each segment visits the cells its two boxes cover (compiled kernel).

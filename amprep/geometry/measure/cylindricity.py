@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from amprep.geometry.core.vectors import cross
+
 
 @dataclass(frozen=True)
 class Cylindricity:
@@ -32,9 +34,9 @@ def radial_distances(points: np.ndarray, point: np.ndarray, direction: np.ndarra
 
 def _frame(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     helper = np.eye(3)[np.argmin(np.abs(d))]
-    e1 = np.cross(d, helper)
+    e1 = cross(d, helper)
     e1 /= np.linalg.norm(e1)
-    return e1, np.cross(d, e1)
+    return e1, cross(d, e1)
 
 
 def _axis(params: np.ndarray, a0: np.ndarray, d0: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

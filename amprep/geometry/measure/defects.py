@@ -10,6 +10,7 @@ from amprep.geometry.core.checks import degenerate_mask
 from amprep.geometry.core.edges import EdgeIncidence, edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import ProgressFn
+from amprep.geometry.core.vectors import cross
 
 
 def boundary_loops(mesh: Mesh, inc: EdgeIncidence | None = None) -> list[float]:
@@ -144,8 +145,8 @@ def triangles_cross(A: np.ndarray, B: np.ndarray, rel_eps: float = 1e-12) -> np.
     """(n,) bool for (n, 3, 3) triangle pairs: each has vertices strictly on both sides of the other's plane and their
     stretches on the planes' common line overlap over a positive length (Möller's interval test). Coplanar pairs
     and pairs that only touch are not crossings."""
-    nA = np.cross(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
-    nB = np.cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0])
+    nA = cross(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
+    nB = cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0])
     scale = np.maximum(np.ptp(A.reshape(-1, 3), axis=0).max(), 1e-300)
     dA = np.einsum("nkd,nd->nk", A - B[:, None, 0], nB)
     dB = np.einsum("nkd,nd->nk", B - A[:, None, 0], nA)
@@ -154,7 +155,7 @@ def triangles_cross(A: np.ndarray, B: np.ndarray, rel_eps: float = 1e-12) -> np.
     dA = np.where(np.abs(dA) <= tolA, 0.0, dA)
     dB = np.where(np.abs(dB) <= tolB, 0.0, dB)
     straddle = ((dA > 0).any(1) & (dA < 0).any(1)) & ((dB > 0).any(1) & (dB < 0).any(1))
-    line = np.cross(nA, nB)
+    line = cross(nA, nB)
     out = np.zeros(len(A), bool)
     if not straddle.any():
         return out

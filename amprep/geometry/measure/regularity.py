@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from amprep.geometry.core.vectors import cross, norms, triangle_normals
+
 #: The source table's bins: [0, 0.005), [0.005, 0.4), [0.4, 0.8), [0.8, 1.0].
 BIN_EDGES = np.array([0.0, 0.005, 0.4, 0.8])
 MEASURES = ("angle", "area", "edge")
@@ -13,7 +15,7 @@ MEASURES = ("angle", "area", "edge")
 
 def side_lengths(corners: np.ndarray) -> np.ndarray:
     """(m, 3) |c_{k+1} − c_k| of (m, 3, 3) corners (side k is opposite corner k+2)."""
-    return np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)
+    return norms(np.roll(corners, -1, axis=1) - corners)
 
 
 def min_angles(corners: np.ndarray) -> np.ndarray:
@@ -25,7 +27,7 @@ def min_angles(corners: np.ndarray) -> np.ndarray:
     k = sq.argmin(axis=1)
     rows = np.arange(len(corners))
     a, b = sides[rows, (k + 2) % 3], -sides[rows, (k + 1) % 3]  # from corner k+2 to corners k and k+1
-    angle = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("md,md->m", a, b))
+    angle = np.arctan2(norms(cross(a, b)), np.einsum("md,md->m", a, b))
     return np.where((sq[rows, k] > 0) & np.isfinite(angle), angle, 0.0)
 
 
@@ -34,7 +36,7 @@ def regularity(corners: np.ndarray) -> dict[str, np.ndarray]:
     edge q_e = l_min / l_max. Each (m,) in [0, 1]."""
     lengths = side_lengths(corners)
     sq = (lengths**2).sum(axis=1)
-    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    area = 0.5 * norms(triangle_normals(corners))
     with np.errstate(invalid="ignore", divide="ignore"):
         q_area = np.where(sq > 0, 4 * np.sqrt(3) * area / sq, 0.0)
         lmax = lengths.max(axis=1)

@@ -17,6 +17,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.pcurve_shifts import ordered_edges
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
+from amprep.geometry.core.vectors import cross
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.meshing.local_refine import (
     flip_flat_triangles,
@@ -162,7 +163,7 @@ def _straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
     length = float(np.linalg.norm(chord))
     if length <= 0:
         return False
-    off = np.cross(p - p[0], chord / length)
+    off = cross(p - p[0], chord / length)
     return bool(np.linalg.norm(off, axis=1).max() <= 1e-6 * length)
 
 

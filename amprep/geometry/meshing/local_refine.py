@@ -13,6 +13,7 @@ import numpy as np
 from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import edge_codes, edge_incidence
+from amprep.geometry.core.vectors import cross
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.measure.regularity import min_angles
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -147,8 +148,8 @@ def flat_triangles(patch: FacePatch, min_area: float = 0.0, rel_eps: float = NEE
                    | ((v[:, 0] == v[:, 2]) & (v[:, 0] >= 0)))
     distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
     e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
-    cross = np.cross(e1, e2)
-    area2_sq = np.einsum("ij,ij->i", cross, cross)  # (2·area)², compared squared: no square roots
+    normal = cross(e1, e2)
+    area2_sq = np.einsum("ij,ij->i", normal, normal)  # (2·area)², compared squared: no square roots
     e3 = e2 - e1
     longest_sq = np.maximum(np.maximum(np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e2, e2)),
                             np.einsum("ij,ij->i", e3, e3))
@@ -210,7 +211,7 @@ SMOOTH_SETS = 64
 
 def _unit_normals(corners: np.ndarray) -> np.ndarray:
     """(t, 3) unit normals of triangles (t, 3, 3) in space (0 for a degenerate one)."""
-    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    n = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     size = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(size > 0, size, 1.0)
 

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.uv_cdt import inside_loops, surface_speeds
 
 #: a cell that needs at most this many parts per direction is cut into them; one that needs more into about
@@ -51,7 +52,7 @@ def second_form(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.
     the normal is undefined, as at a pole)."""
     hu, hv = float(step[0]), float(step[1])
     p = surface.evaluate((uv[:, None, :] + _OFFSETS[None] * [hu, hv]).reshape(-1, 2)).reshape(len(uv), 9, 3)
-    normal = np.cross(p[:, 1] - p[:, 2], p[:, 3] - p[:, 4])
+    normal = cross(p[:, 1] - p[:, 2], p[:, 3] - p[:, 4])
     length = np.linalg.norm(normal, axis=1)
     normal /= np.where(length > 0, length, 1.0)[:, None]
     s_uu = (p[:, 1] - 2 * p[:, 0] + p[:, 2]) / hu**2

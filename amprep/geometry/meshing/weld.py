@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
+from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.occt_read import FacePatch
 
 
@@ -183,7 +184,7 @@ def split_caps(mesh: Mesh) -> Mesh:
         nb, j = divmod(int(order[i]), 3)  # the neighbour's side j runs c → a; its corner j + 2 is d
         d = int(tris[nb, (j + 2) % 3])
         new = np.array([[cc, b, d], [b, a, d]])
-        area = np.linalg.norm(np.cross(v[new[:, 1]] - v[new[:, 0]], v[new[:, 2]] - v[new[:, 0]]), axis=1)
+        area = np.linalg.norm(cross(v[new[:, 1]] - v[new[:, 0]], v[new[:, 2]] - v[new[:, 0]]), axis=1)
         if (nb in used or mesh.face_ids[nb] != mesh.face_ids[t] or d in (a, b, cc)
                 or not (area > 1e-9 * float(np.dot(v[cc] - v[a], v[cc] - v[a]))).all()):
             continue

@@ -9,6 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.vectors import cross
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ def point_to_plane(src: np.ndarray, dst: np.ndarray, normals: np.ndarray, weight
     centre = (weights @ src) / np.sum(weights)
     arm = src - centre
     scale = max(float(np.abs(arm).max(initial=0.0)), 1e-12)  # rotations in length units, like translations
-    rows = np.hstack([np.cross(arm, normals) / scale, normals]) * w
+    rows = np.hstack([cross(arm, normals) / scale, normals]) * w
     rhs = -((src - dst) * normals).sum(axis=1) * w[:, 0]
     x = np.linalg.lstsq(rows, rhs, rcond=1e-6)[0]
     omega, tau = x[:3] / scale, x[3:]

@@ -9,6 +9,7 @@ from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface, tangents, uv_extent
 from amprep.geometry.core.mesh import FaceInfo, Mesh
+from amprep.geometry.core.vectors import cross
 from amprep.geometry.measure.chordal import barycentric_grid
 
 
@@ -42,7 +43,7 @@ class ReferenceCloud:
 def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
     """(n, 3) unit normals S_u × S_v / |S_u × S_v| at (n, 2) uv; zero where the two are parallel (a pole, an apex)."""
     su, sv = tangents(surface, np.asarray(uv, float))
-    n = np.cross(su, sv)
+    n = cross(su, sv)
     size = np.linalg.norm(n, axis=1, keepdims=True)
     scale = np.linalg.norm(su, axis=1, keepdims=True) * np.linalg.norm(sv, axis=1, keepdims=True)
     return np.where(size > 1e-9 * scale, n / np.where(size > 0, size, 1.0), 0.0)

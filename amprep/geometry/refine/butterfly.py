@@ -36,6 +36,7 @@ import numpy as np
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.core.vectors import cross
 from amprep.geometry.refine.stl_features import (
     CURVE,
     SURFACE,
@@ -254,7 +255,7 @@ def _child_crosses(v: np.ndarray, new: np.ndarray, t: np.ndarray, sides: np.ndar
     c = [v[t[:, k]] for k in range(3)]
     m = [new[sides[:, k]] for k in range(3)]
     kids = ((c[0], m[0], m[2]), (c[1], m[1], m[0]), (c[2], m[2], m[1]), (m[0], m[1], m[2]))
-    return np.stack([np.cross(b - a, cc - a) for a, b, cc in kids])
+    return np.stack([cross(b - a, cc - a) for a, b, cc in kids])
 
 
 def _unfold(v: np.ndarray, t: np.ndarray, parent: np.ndarray, area2: np.ndarray, edge_of: np.ndarray, new: np.ndarray,
@@ -272,9 +273,9 @@ def _unfold(v: np.ndarray, t: np.ndarray, parent: np.ndarray, area2: np.ndarray,
         if len(active) == 0:
             return
         tt, eo = t[active], edge_of[active]
-        cross = _child_crosses(v, new, tt, eo)
-        norm = np.linalg.norm(cross, axis=2)
-        cos = np.einsum("kmj,mj->km", cross, parent[active]) / np.maximum(norm, 1e-300)
+        normals = _child_crosses(v, new, tt, eo)
+        norm = np.linalg.norm(normals, axis=2)
+        cos = np.einsum("kmj,mj->km", normals, parent[active]) / np.maximum(norm, 1e-300)
         bad = ((cos < 0.3) & (norm > 0)).any(axis=0) & (np.linalg.norm(parent[active], axis=1) > 0)
         if not bad.any():
             return

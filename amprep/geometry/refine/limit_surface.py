@@ -21,6 +21,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.core.vectors import norms, triangle_normals
 from amprep.geometry.refine.butterfly import ButterflyParams, ButterflyResult, butterfly_refine
 
 #: the finest level kept for evaluation: 4^depth · m triangles, at most this many (depth ≥ 1)
@@ -209,7 +210,7 @@ def remesh_to_edge(surface: LimitSurface, max_edge: float, max_triangles: int,
     t = np.asarray(surface.coarse.triangles, np.int64)
     root = np.arange(len(t))
     bary = np.broadcast_to(np.eye(3), (len(t), 3, 3)).copy()  # corner c of triangle i in its root triangle
-    area = 0.5 * np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1).sum()
+    area = 0.5 * norms(triangle_normals(v[t])).sum()
     estimate = len(t) + 4 * area / (np.sqrt(3) / 4 * max_edge**2)
     if estimate > max_triangles:
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"splitting every edge down to {max_edge:g} mm needs about "

@@ -12,6 +12,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from amprep.geometry.core import vectors
 from amprep.geometry.core.edges import edge_incidence
 
 SURFACE, CURVE, VERTEX = 0, 1, 2
@@ -24,9 +25,7 @@ HEIGHT_RATIO = 3.0
 
 def normals_and_areas(v: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((m, 3) unit normals (0 for a degenerate triangle), (m,) doubled areas |(v1 − v0) × (v2 − v0)|)."""
-    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0), norm[:, 0]
+    return vectors.unit_normals(v[t])
 
 
 def unit_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -100,7 +99,7 @@ def classify(v: np.ndarray, t: np.ndarray, feature_angle: float, flat_faces: boo
     # side's (a facet of a curved face is as wide as the tessellation tolerance allows, a flat face is not)
     a, b = he.edges[e, 0], he.edges[e, 1]
     length = np.maximum(np.linalg.norm(v[b] - v[a], axis=1), 1e-300)
-    area = 0.5 * np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1)
+    area = 0.5 * vectors.norms(vectors.triangle_normals(v[t]))
     h1, h2 = 2 * area[t1] / length, 2 * area[t2] / length
     big = np.where(h1 >= h2, t1, t2)
     ratio = np.maximum(h1, h2) / np.maximum(np.minimum(h1, h2), 1e-300)

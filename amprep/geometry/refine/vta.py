@@ -9,6 +9,7 @@ import numpy as np
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.mesh import IN_FACE, Mesh
+from amprep.geometry.core.vectors import unit_normals
 from amprep.geometry.measure.chordal import barycentric_grid
 from amprep.geometry.refine.sma import Refinement
 
@@ -21,9 +22,7 @@ def _interior_grid(order: int) -> np.ndarray:
 
 def _worst_points(corners: np.ndarray, uv: np.ndarray, surf: Surface, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """((k, 2) uv, (k, 3) S(uv), (k,) error) of each triangle's interior sample farthest from its plane."""
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    norm = np.linalg.norm(normal, axis=1)
-    unit = np.divide(normal, norm[:, None], out=np.zeros_like(normal), where=norm[:, None] > 0)
+    unit = unit_normals(corners)[0]
     pts_uv = np.einsum("pk,mkd->mpd", w, uv)
     xyz = surf.evaluate(pts_uv.reshape(-1, 2)).reshape(len(corners), len(w), 3)
     d = np.abs(np.einsum("mpd,md->mp", xyz - corners[:, None, 0], unit))
