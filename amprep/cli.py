@@ -72,7 +72,7 @@ def _job_values(kind: str, args: argparse.Namespace) -> dict[str, Any]:
 
 def _write_json(path: str | None, data: dict[str, Any], indent: int = 1) -> None:
     if path:
-        with open(path, "w") as fh:
+        with open(path, "w", encoding="utf-8") as fh:
             json.dump(data, fh, indent=indent, default=float)
 
 

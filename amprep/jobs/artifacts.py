@@ -35,7 +35,7 @@ def write_analysis(a: Analysis, out_dir: Path, with_plots: bool = True) -> list[
     """Files of an analysis under out_dir; returns their paths (report.json first)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     report = out_dir / "report.json"
-    report.write_text(json.dumps(a.report, indent=1, default=float, allow_nan=False))
+    report.write_text(json.dumps(a.report, indent=1, default=float, allow_nan=False), encoding="utf-8")
     paths = [report]
     mesh = out_dir / "mesh.stl"
     write_stl(a.mesh, mesh, header="amprep analysis: the mesh the report scores")
@@ -64,7 +64,7 @@ def write_refinement(r: RefineResult, out_dir: Path, name: str = "refined.stl", 
     out_dir.mkdir(parents=True, exist_ok=True)
     mesh_path = write_refined_mesh(r, out_dir / name, ascii)
     report = out_dir / "report.json"
-    report.write_text(json.dumps(r.report, indent=1, default=float, allow_nan=False))
+    report.write_text(json.dumps(r.report, indent=1, default=float, allow_nan=False), encoding="utf-8")
     field = out_dir / "chordal_error.f32"
     field.write_bytes(np.asarray(r.chordal, "<f4").tobytes())
     before = out_dir / "before.stl"

@@ -30,7 +30,7 @@ def run_convert(src: Path, stl: Path | None, params: dict[str, Any], out_dir: Pa
     written = write_result(result, out, ascii=params["ascii"])
     summary = result.summary()
     summary["output"] = {k: v for k, v in written.items() if k != "path"} | {"name": out.name}
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float), encoding="utf-8")
     return summary, [out, out_dir / "summary.json"]
 
 

@@ -71,3 +71,19 @@ def test_3mf_objects_closed_with_face_ids(tmp_path, reference_solids):
     while it.MoveNext():
         sets += it.GetCurrentMeshObject().GetTriangleSetCount()
     assert sets == len(mesh.faces)  # one triangle set per CAD face
+
+
+def test_3mf_write_and_read_leave_the_process_locale_as_they_found_it(torus_mesh, tmp_path):
+    """lib3mf sets every locale category to "C": a worker's later jobs would open text files as ASCII."""
+    import locale
+    saved = locale.setlocale(locale.LC_ALL)
+    try:
+        locale.setlocale(locale.LC_ALL, "C.UTF-8")  # not "C", whatever the machine's own, so a change shows
+        before = locale.setlocale(locale.LC_ALL)
+        write_3mf(torus_mesh, tmp_path / "t.3mf")
+        assert locale.setlocale(locale.LC_ALL) == before
+        read_3mf_objects(tmp_path / "t.3mf")
+        assert locale.setlocale(locale.LC_ALL) == before
+        assert locale.getpreferredencoding(False).lower().replace("-", "") == "utf8"
+    finally:
+        locale.setlocale(locale.LC_ALL, saved)

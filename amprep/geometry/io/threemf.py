@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import locale
 import uuid
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 
 import lib3mf
@@ -45,8 +47,24 @@ def _uuid(seed: str, what: str) -> str:
     return str(uuid.uuid5(uuid.NAMESPACE_URL, f"amprep:{seed}:{what}"))
 
 
+@contextmanager
+def _locale_kept() -> Iterator[None]:
+    """Restore the process's locale after lib3mf: its reader and writer set every category to "C" and leave it so,
+    which turns a worker's default text encoding to ASCII for every later job (open() without an encoding)."""
+    saved = locale.setlocale(locale.LC_ALL)
+    try:
+        yield
+    finally:
+        locale.setlocale(locale.LC_ALL, saved)
+
+
 def write_3mf(mesh: Mesh, path: str | Path, metadata: Mapping[str, str] | None = None) -> list[bool]:
     """Write a 3MF; returns lib3mf's IsManifoldAndOriented per object (vertices shared within an object)."""
+    with _locale_kept():
+        return _write(mesh, path, metadata)
+
+
+def _write(mesh: Mesh, path: str | Path, metadata: Mapping[str, str] | None) -> list[bool]:
     wrapper = lib3mf.get_wrapper()
     model = wrapper.CreateModel()
     model.SetUnit(lib3mf.ModelUnit.MilliMeter)
@@ -84,7 +102,8 @@ def read_3mf_objects(path: str | Path) -> list[tuple[str, np.ndarray, np.ndarray
     """(name, vertices (n, 3), triangles (m, 3), manifold-and-oriented) of each mesh object of a 3MF."""
     wrapper = lib3mf.get_wrapper()
     model = wrapper.CreateModel()
-    model.QueryReader("3mf").ReadFromFile(str(path))
+    with _locale_kept():
+        model.QueryReader("3mf").ReadFromFile(str(path))
     out = []
     it = model.GetMeshObjects()
     while it.MoveNext():
