@@ -112,6 +112,27 @@ def test_one_triangle_per_category_and_shared_edge_points():
     assert r1.mesh.n_triangles == 33 and check_mesh(r1.mesh).boundary_edges == 3
 
 
+def test_sma_on_a_sheared_parametrisation_turns_no_triangle_over_and_keeps_shared_points_shared():
+    """A flat sheet S(u,v) = (u² + u/20, v, 0): (u,v) crowds toward x = 0, so the (u,v) centroid of the triangle
+    (0, ½) (1, 0) (1, 1) lands at x = 0.48 while its corners' centroid in space is at 0.70, and four of its 33
+    children turn over (their area counted twice). Its face's points are placed in space instead: no child turned,
+    the area the sheet's, the edge it shares with its neighbour split at the same two points from both sides."""
+    sheared = Surface("bspline", lambda q: np.column_stack([q[:, 0] ** 2 + q[:, 0] / 20, q[:, 1], np.zeros(len(q))]),
+                      bounds=(0.0, 1.0, 0.0, 1.0))
+    uv = np.array([[0, 0.5], [1, 0], [1, 1], [2, 0.5]], float)
+    t = np.array([[0, 1, 2], [1, 3, 2]])
+    mesh = Mesh(sheared.evaluate(uv), t, np.zeros(2, np.int32), uv[t])
+    r = sma_refine(mesh, [0], {0: sheared}).mesh
+    assert r.n_triangles == 62
+    c = r.corners
+    assert (np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])[:, 2] > 0).all()  # every child faces up, as the sheet
+    checks = check_mesh(r)
+    assert checks.area == pytest.approx(check_mesh(mesh).area, rel=1e-12)
+    assert checks.boundary_edges == 4 and checks.nonmanifold_edges == 0 and checks.misoriented_edges == 0
+    on_edge = np.abs(r.vertices[:, 0] - 1.05) < 1e-9  # the shared edge (1, 0)-(1, 1): its points at 3/10, 7/10
+    assert np.allclose(np.sort(r.vertices[on_edge, 1]), [0, 0.3, 0.7, 1])
+
+
 def test_ratios_are_parsed_and_checked():
     r = Ratios.parse("1:2:1,2:1:2")
     assert r.spoke_fractions == (0.25, 0.75) and r.edge_fractions == (0.4, 0.6)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from amprep.geometry.cad.surfaces import Surface, tangents, uv_extent
+from amprep.geometry.cad.surfaces import Surface, project_points, tangents
 from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.measure.chordal import barycentric_grid
@@ -47,29 +47,6 @@ def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
     size = np.linalg.norm(n, axis=1, keepdims=True)
     scale = np.linalg.norm(su, axis=1, keepdims=True) * np.linalg.norm(sv, axis=1, keepdims=True)
     return np.where(size > 1e-9 * scale, n / np.where(size > 0, size, 1.0), 0.0)
-
-
-def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss–Newton on |S(u,v) − p|² from uv0, all points at once, derivatives by central differences:
-    ((n, 2) (u,v), (n,) distance |S(u,v) − p|)."""
-    uv = np.array(uv0, dtype=float)
-    span = uv_extent(surface)
-    for _ in range(iterations):
-        s = surface.evaluate(uv)
-        su, sv = tangents(surface, uv)
-        r = s - points
-        a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
-        gu, gv = (su * r).sum(1), (sv * r).sum(1)
-        det = a * c - b * b
-        ok = np.abs(det) > 1e-30
-        du = np.where(ok, -(c * gu - b * gv) / np.where(ok, det, 1), 0.0)
-        dv = np.where(ok, -(a * gv - b * gu) / np.where(ok, det, 1), 0.0)
-        step = np.stack([du, dv], 1)
-        limit = 0.25 * span  # no jumps across the domain from a bad start
-        uv = uv + np.clip(step, -limit, limit)
-        if np.abs(step / span).max(initial=0) < 1e-12:
-            break
-    return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1)
 
 
 def unwrap_corners(uv: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:

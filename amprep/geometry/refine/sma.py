@@ -15,9 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.surfaces import Surface, project_points, tangents
 from amprep.geometry.core.edges import face_edge_table
 from amprep.geometry.core.mesh import IN_FACE, Mesh
+from amprep.geometry.core.vectors import cross, norms, triangle_normals
 
 # Local labels of a section's points.
 C, CI1, CJ1, CI2, MID, CJ2, PI, PJ, E1, E2, Q1, Q2 = range(12)
@@ -110,18 +111,13 @@ def sma_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Su
         return Refinement(mesh, {}, np.arange(mesh.n_triangles))
     s = _Sections(mesh.triangles[sel], mesh.uv[sel], mesh.face_ids[sel], edge_id[sel], ~inner[edge_id[sel]], ratios)
     ids = _Numbering.of(s, mesh.n_vertices)
-    new_uv, new_face = ids.new_points(s)
-    new_xyz = np.empty((len(new_uv), 3))
-    for f in np.unique(new_face):
-        idx = np.flatnonzero(new_face == f)
-        new_xyz[idx] = surfaces[int(f)].evaluate(new_uv[idx])
-    lab, lab_uv = _labels(s, ids, new_uv, surfaces)
-    out_tris, out_uv, out_parent = [], [], []
-    for pattern, which in ((TYPE_I, ~s.contour), (TYPE_II, s.contour)):
-        rows, cols = np.nonzero(which)
-        out_tris.append(lab[rows, cols][:, pattern].reshape(-1, 3))  # (s, p, 3)
-        out_uv.append(lab_uv[rows, cols][:, pattern].reshape(-1, 3, 2))  # (s, p, 3, 2)
-        out_parent.append(np.repeat(sel[rows], len(pattern)))
+    new_uv, new_xyz, out_tris, out_uv, out_rows = _build(s, ids, surfaces)
+    folded = _turned_over(np.concatenate([mesh.vertices, new_xyz]), out_tris, out_rows, mesh.vertices[s.tri])
+    folded &= ~_at_a_pole(s, surfaces)  # an apex's corner has a (u,v) of its triangle's choosing: space decides none
+    if folded.any():  # where (u,v) shears across a triangle: its face's new points placed in space, then projected
+        _place_in_space(s, np.isin(s.fid, s.fid[folded]), mesh.vertices, surfaces)
+        new_uv, new_xyz, out_tris, out_uv, out_rows = _build(s, ids, surfaces)
+    out_parent = [sel[rows] for rows in out_rows]
 
     keep = np.setdiff1d(np.arange(mesh.n_triangles), sel)
     triangles = np.concatenate([mesh.triangles[keep], *out_tris])
@@ -131,6 +127,7 @@ def sma_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Su
     triangles, parent, uv_all = triangles[order], parent[order], uv_all[order]
 
     n_new = len(new_uv)
+    new_face = ids.new_points(s)[1]
     def extend(a: np.ndarray | None, fill: np.ndarray) -> np.ndarray | None:  # noqa: E306
         return None if a is None else np.concatenate([a, fill.astype(a.dtype)])
     refined = Mesh(
@@ -142,6 +139,82 @@ def sma_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Su
         counts = np.bincount(s.contour[s.fid == f].sum(axis=1), minlength=4)
         categories[int(f)] = [int(x) for x in counts]
     return Refinement(refined, categories, parent)
+
+
+def _build(s: _Sections, ids: _Numbering, surfaces: dict[int, Surface]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray],
+                                                                            list[np.ndarray], list[np.ndarray]]:
+    """The new points' (u,v) (n, 2) and S(u,v) (n, 3), and the children: per pattern (Type I, Type II) their
+    triangles (c, 3), their corners' (u,v) (c, 3, 2) and the section row each comes from (c,)."""
+    new_uv, new_face = ids.new_points(s)
+    new_xyz = np.empty((len(new_uv), 3))
+    for f in np.unique(new_face):
+        idx = np.flatnonzero(new_face == f)
+        new_xyz[idx] = surfaces[int(f)].evaluate(new_uv[idx])
+    lab, lab_uv = _labels(s, ids, new_uv, surfaces)
+    out_tris, out_uv, out_rows = [], [], []
+    for pattern, which in ((TYPE_I, ~s.contour), (TYPE_II, s.contour)):
+        rows, cols = np.nonzero(which)
+        out_tris.append(lab[rows, cols][:, pattern].reshape(-1, 3))  # (s, p, 3)
+        out_uv.append(lab_uv[rows, cols][:, pattern].reshape(-1, 3, 2))  # (s, p, 3, 2)
+        out_rows.append(np.repeat(rows, len(pattern)))
+    return new_uv, new_xyz, out_tris, out_uv, out_rows
+
+
+def _turned_over(xyz: np.ndarray, out_tris: list[np.ndarray], out_rows: list[np.ndarray],
+                 parents: np.ndarray) -> np.ndarray:
+    """(k,) bool: the chosen triangles (corners (k, 3, 3)) with a child turned over against them in space."""
+    n = triangle_normals(parents)
+    folded = np.zeros(len(parents), bool)
+    for tris, rows in zip(out_tris, out_rows, strict=True):
+        c = xyz[tris]
+        d = np.einsum("ij,ij->i", triangle_normals(c), n[rows])
+        folded[rows[d < 0]] = True
+    return folded
+
+
+def _at_a_pole(s: _Sections, surfaces: dict[int, Surface]) -> np.ndarray:
+    """(k,) bool: the chosen triangles with a corner where S_u × S_v vanishes (a pole or apex)."""
+    out = np.zeros(len(s.tri), bool)
+    for f in np.unique(s.fid):
+        k = np.flatnonzero(s.fid == f)
+        su, sv = tangents(surfaces[int(f)], s.uv[k].reshape(-1, 2))
+        size = norms(cross(su, sv))
+        scale = norms(su) * norms(sv)
+        out[k] = (size <= 1e-6 * scale + 1e-300).reshape(-1, 3).any(axis=1)
+    return out
+
+
+def _place_in_space(s: _Sections, rows: np.ndarray, vertices: np.ndarray, surfaces: dict[int, Surface]) -> None:
+    """Place the new points of the sections' rows (k,) bool, whole faces, in space and project them onto the surface
+    (surfaces.project_points, from their (u,v)): a triangle's own points (centroid, spoke, middle and band points) at
+    the barycentric coordinates they have in (u,v), on the corners; the two points of an inner edge at the edge
+    fractions of its chord, once per edge (canon_a, canon_b), so both its triangles take the same."""
+    r = np.flatnonzero(rows)
+    a, b, c = s.uv[r, 0], s.uv[r, 1], s.uv[r, 2]
+    m = np.stack([b - a, c - a], axis=2)  # (k, 2, 2): columns b − a, c − a
+    corners = vertices[s.tri[r]]
+    for name in ("uc", "spoke1", "spoke2", "mid", "band1", "band2"):
+        arr = getattr(s, name)
+        q = arr[r].reshape(len(r), -1, 2)  # (k, p, 2): p = 1 for the centroid, 3 for the others
+        lam = np.linalg.solve(m[:, None], (q - a[:, None])[..., None])[..., 0]  # (k, p, 2)
+        bary = np.concatenate([1 - lam.sum(axis=2, keepdims=True), lam], axis=2)  # (k, p, 3)
+        arr[r] = _projected(np.einsum("kpj,kjd->kpd", bary, corners), q, s.fid[r], surfaces).reshape(arr[r].shape)
+    edges = np.isin(s.canon_face, s.fid[r])
+    lo, hi = vertices[s.canon_lo[edges]], vertices[s.canon_hi[edges]]
+    for name, frac in zip(("canon_a", "canon_b"), s.edge_fractions, strict=True):
+        arr = getattr(s, name)
+        arr[edges] = _projected((lo + frac * (hi - lo))[:, None], arr[edges][:, None], s.canon_face[edges],
+                                surfaces)[:, 0]
+
+
+def _projected(target: np.ndarray, uv0: np.ndarray, fid: np.ndarray, surfaces: dict[int, Surface]) -> np.ndarray:
+    """(k, p, 2) (u,v) of the surface points nearest target (k, p, 3), row i on face fid[i], from uv0 (k, p, 2)."""
+    out = uv0.copy()
+    for f in np.unique(fid):
+        k = fid == f
+        out[k] = project_points(surfaces[int(f)], target[k].reshape(-1, 3), uv0[k].reshape(-1, 2))[0].reshape(
+            uv0[k].shape)
+    return out
 
 
 class _Sections:
@@ -171,6 +244,10 @@ class _Sections:
         mask = ~contour
         self.uniq_edges, first = np.unique(ei[mask], return_index=True)
         self.canon_a, self.canon_b = lo_first[mask][first], lo_second[mask][first]
+        tri_next = np.roll(tri, -1, axis=1)
+        self.canon_lo = np.minimum(tri, tri_next)[mask][first]
+        self.canon_hi = np.maximum(tri, tri_next)[mask][first]
+        self.edge_fractions = (e1, e2)
         self.canon_face = np.broadcast_to(fid[:, None], (k, 3))[mask][first]
         self.edge_slot = np.searchsorted(self.uniq_edges, ei.clip(min=0))  # valid where mask
 
