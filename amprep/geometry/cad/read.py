@@ -26,6 +26,7 @@ from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_Ind
 from OCP.XSControl import XSControl_Reader
 
 from amprep.errors import AmprepError, ErrorCode, is_occt_failure
+from amprep.geometry.cad.creases import split_at_creases
 from amprep.geometry.cad.locations import bake_scaled_locations
 from amprep.geometry.cad.pcurve_shifts import fix_shifted_pcurves
 from amprep.geometry.cad.topology import compound, explore
@@ -245,11 +246,20 @@ def read_cad(path: str | Path, fmt: str | None = None) -> CadModel:
 
         with occt_messages_muted():
             acis = read_acis_file(path, fmt)
-        return model_from_shape(acis.shape, fmt, acis.units, False, tuple(acis.notes()), tuple(acis.skipped))
+            shape, split = split_at_creases(acis.shape)
+        return model_from_shape(shape, fmt, acis.units, False, tuple(acis.notes()) + _split_note(split),
+                                tuple(acis.skipped))
     shape, units = read_shape(path, fmt)
     with occt_messages_muted():
         shifted = fix_shifted_pcurves(shape)
     shape, sewn = sew_loose_faces(shape)
+    with occt_messages_muted():
+        shape, split = split_at_creases(shape)
     notes = (f"{shifted} face boundar{'y' if shifted == 1 else 'ies'} in (u,v) a period apart: moved onto one period",
              ) if shifted else ()
-    return model_from_shape(shape, fmt, units, sewn, notes)
+    return model_from_shape(shape, fmt, units, sewn, notes + _split_note(split))
+
+
+def _split_note(split: int) -> tuple[str, ...]:
+    return (f"{split} face{'' if split == 1 else 's'} split along {'its' if split == 1 else 'their'} creases (a "
+            "B-spline's C0 knot lines where the surface turns), so that the mesh has edges on them",) if split else ()
