@@ -30,9 +30,10 @@ from tests.conftest import corpus
 KINK = 2 * np.degrees(np.arctan(2 / 5))  # the profile's turn at x = 10: (5, −2) then (5, 2)
 
 
-def _kinked_prism():
-    """A prism 10 high on a profile whose top side is a quadratic B-spline with a double knot at (10, 0), converted
-    to B-spline faces throughout: its side face over that curve is folded along the vertical line x = 10."""
+def _kinked_prism(nurbs: bool = True):
+    """A prism 10 high on a profile whose top side is a quadratic B-spline with a double knot at (10, 0): its side
+    face over that curve (a surface of extrusion, or with `nurbs` a B-spline surface, as every face converted) is
+    folded along the vertical line x = 10."""
     pts = [(0, 0), (5, 2), (10, 0), (15, 2), (20, 0)]
     poles = TColgp_Array1OfPnt(1, len(pts))
     for i, (x, y) in enumerate(pts):
@@ -46,7 +47,7 @@ def _kinked_prism():
     for a, b in (((20, 0), (20, -10)), ((20, -10), (0, -10)), ((0, -10), (0, 0))):
         wire.Add(BRepBuilderAPI_MakeEdge(gp_Pnt(*a, 0), gp_Pnt(*b, 0)).Edge())
     prism = BRepPrimAPI_MakePrism(BRepBuilderAPI_MakeFace(wire.Wire()).Face(), gp_Vec(0, 0, 10)).Shape()
-    return BRepBuilderAPI_NurbsConvert(prism, True).Shape()
+    return BRepBuilderAPI_NurbsConvert(prism, True).Shape() if nurbs else prism
 
 
 def _volume(shape) -> float:
@@ -65,9 +66,9 @@ def _straddling(mesh) -> int:
     return int((upright & curved & (x.min(axis=1) < 10 - 1e-6) & (x.max(axis=1) > 10 + 1e-6)).sum())
 
 
-@pytest.mark.parametrize("mesher", ["occt", "quality"])
-def test_a_folded_bspline_face_is_split_along_its_crease_and_meshed_across_none_of_it(mesher):
-    shape = _kinked_prism()
+@pytest.mark.parametrize("mesher,nurbs", [("occt", True), ("quality", True), ("occt", False), ("quality", False)])
+def test_a_folded_face_is_split_along_its_crease_and_meshed_across_none_of_it(mesher, nurbs):
+    shape = _kinked_prism(nurbs)
     angles = [crease_angle(f) for f in model_from_shape(shape).faces]
     assert max(angles) == pytest.approx(KINK, abs=0.5) and sorted(angles)[-2] < 0.01  # one folded face, the rest not
     split, n = split_at_creases(shape)

@@ -1,6 +1,7 @@
-"""Creases inside a face: a B-spline surface's interior knot line of multiplicity ≥ its degree is only C0 there, and
-where its normal turns across that line the face is folded along it (a ship's chine, two patches joined with a
-kink). A mesh that does not put edges on that line cuts across it: its triangles there go over the tolerance unless
+"""Creases inside a face: a B-spline surface's interior knot line of multiplicity ≥ its degree is only C0 there (so
+is a surface of extrusion or revolution along such a knot of the B-spline curve it sweeps), and where its normal
+turns across that line the face is folded along it (a ship's chine, two patches joined with a kink, a profile with
+a corner inside one curve). A mesh that does not put edges on that line cuts across it: its triangles there go over the tolerance unless
 tiny, and can fold against each other. Such faces are split along their creases (OCCT's ShapeUpgrade) before
 meshing, so that the crease becomes an edge shared by the two new faces, discretised once like any other."""
 
@@ -11,7 +12,15 @@ from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepLib import BRepLib
 from OCP.BRepTools import BRepTools
-from OCP.GeomAbs import GeomAbs_BSplineSurface, GeomAbs_C0, GeomAbs_C1
+from OCP.Geom import Geom_Surface
+from OCP.GeomAbs import (
+    GeomAbs_BSplineCurve,
+    GeomAbs_BSplineSurface,
+    GeomAbs_C0,
+    GeomAbs_C1,
+    GeomAbs_SurfaceOfExtrusion,
+    GeomAbs_SurfaceOfRevolution,
+)
 from OCP.GeomAdaptor import GeomAdaptor_Surface
 from OCP.ShapeBuild import ShapeBuild_ReShape
 from OCP.ShapeUpgrade import ShapeUpgrade_ShapeDivideContinuity
@@ -34,16 +43,34 @@ SIDE = 1e-4
 PARTED = 10.0
 
 
+def knot_lines(surface: Geom_Surface) -> list[tuple[int, float]]:
+    """(direction, parameter) of the surface's C0 knot lines, u = k (0) or v = k (1): interior knots of multiplicity ≥
+    the degree of a B-spline surface, and of the B-spline curve a surface of extrusion (along u) or revolution
+    (along v) sweeps; none for another surface."""
+    adaptor = GeomAdaptor_Surface(surface)
+    kind = adaptor.GetType()
+    if kind == GeomAbs_BSplineSurface:
+        bs = adaptor.BSpline()
+        return ([(0, bs.UKnot(k)) for k in range(2, bs.NbUKnots()) if bs.UMultiplicity(k) >= bs.UDegree()]
+                + [(1, bs.VKnot(k)) for k in range(2, bs.NbVKnots()) if bs.VMultiplicity(k) >= bs.VDegree()])
+    if kind in (GeomAbs_SurfaceOfExtrusion, GeomAbs_SurfaceOfRevolution):
+        curve = adaptor.BasisCurve()
+        if curve.GetType() != GeomAbs_BSplineCurve:
+            return []
+        bc = curve.BSpline()
+        d = 0 if kind == GeomAbs_SurfaceOfExtrusion else 1
+        return [(d, bc.Knot(k)) for k in range(2, bc.NbKnots()) if bc.Multiplicity(k) >= bc.Degree()]
+    return []
+
+
 def crease_angle(face: TopoDS_Face) -> float:
-    """The largest turn (degrees) of the surface normal across any interior knot line of multiplicity ≥ the degree
-    inside the face's (u,v) box (0 for a face that is not a B-spline or has no such line)."""
+    """The largest turn (degrees) of the surface normal across any of its C0 knot lines (knot_lines) inside the
+    face's (u,v) box (0 for a face with none)."""
     surface = BRep_Tool.Surface_s(face)
-    if surface is None or GeomAdaptor_Surface(surface).GetType() != GeomAbs_BSplineSurface:
+    lines = knot_lines(surface) if surface is not None else []
+    if not lines:
         return 0.0
-    bs = GeomAdaptor_Surface(surface).BSpline()
     u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
-    lines = [(0, bs.UKnot(k)) for k in range(2, bs.NbUKnots()) if bs.UMultiplicity(k) >= bs.UDegree()]
-    lines += [(1, bs.VKnot(k)) for k in range(2, bs.NbVKnots()) if bs.VMultiplicity(k) >= bs.VDegree()]
     box = np.array([[u0, u1], [v0, v1]])
     lines = [(d, k) for d, k in lines if box[d, 0] < k < box[d, 1]]
     if not lines:
