@@ -103,16 +103,18 @@ def split_at_creases(shape: TopoDS_Shape) -> tuple[TopoDS_Shape, int]:
     try:
         faces = [f for f in (TopoDS.Face_s(found.FindKey(i)) for i in range(1, found.Extent() + 1))
                  if crease_angle(f) > CREASE_DEGREES]
-        return (_split(shape, faces), len(faces)) if faces else (shape, 0)
+        return _split(shape, faces) if faces else (shape, 0)
     except Exception as exc:  # the split is a help, not a need: a face OCCT cannot divide is meshed whole
         if not is_occt_failure(exc):
             raise
         return shape, 0
 
 
-def _split(shape: TopoDS_Shape, faces: list[TopoDS_Face]) -> TopoDS_Shape:
-    """The shape with `faces` divided at their C0 knot lines (split_at_creases)."""
+def _split(shape: TopoDS_Shape, faces: list[TopoDS_Face]) -> tuple[TopoDS_Shape, int]:
+    """(the shape with `faces` divided at their C0 knot lines, how many were): split_at_creases's work. A face whose
+    crease lies in its (u,v) box but outside its trim is not divided, and not counted."""
     context = ShapeBuild_ReShape()
+    divided = 0
     for face in faces:
         divide = ShapeUpgrade_ShapeDivideContinuity(face)
         divide.SetContext(context)
@@ -121,12 +123,15 @@ def _split(shape: TopoDS_Shape, faces: list[TopoDS_Face]) -> TopoDS_Shape:
         divide.SetPCurveCriterion(GeomAbs_C0)  # on the DTMB hull's trim)
         if divide.Perform():
             context = divide.GetContext()
+            divided += 1
+    if not divided:
+        return shape, 0
     out = context.Apply(shape)
     pieces = TopTools_IndexedMapOfShape()
     for face in faces:
         TopExp.MapShapes_s(context.Value(face), TopAbs_FACE, pieces)
     _rebuild_parted_edges(out, pieces)
-    return out
+    return out, divided
 
 
 def _rebuild_parted_edges(shape: TopoDS_Shape, pieces: TopTools_IndexedMapOfShape) -> None:
