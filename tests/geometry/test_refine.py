@@ -133,6 +133,19 @@ def test_sma_on_a_sheared_parametrisation_turns_no_triangle_over_and_keeps_share
     assert np.allclose(np.sort(r.vertices[on_edge, 1]), [0, 0.3, 0.7, 1])
 
 
+def test_sma_places_a_sheared_face_in_space_past_a_triangle_of_no_area_in_uv():
+    """A face placed in space (one child turned over) may hold a triangle whose (u,v) corners are on one line, as at
+    a pole: its points stay where (u,v) put them instead of stopping the refinement on a singular matrix."""
+    sheared = Surface("bspline", lambda q: np.column_stack([q[:, 0] ** 2 + q[:, 0] / 20, q[:, 1], np.zeros(len(q))]),
+                      bounds=(0.0, 1.0, 0.0, 1.0))
+    uv = np.array([[0, 0.5], [1, 0], [1, 1], [2, 0.5], [3, 0], [3, 0.5], [3, 1]], float)
+    t = np.array([[0, 1, 2], [1, 3, 2], [4, 5, 6]])
+    r = sma_refine(Mesh(sheared.evaluate(uv), t, np.zeros(3, np.int32), uv[t]), [0], {0: sheared}).mesh
+    assert r.n_triangles == 62 + 33 and np.isfinite(r.vertices).all()
+    c = r.corners[:62]  # the two sheared triangles' children (kept in their parents' order) all face up
+    assert (np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])[:, 2] > 0).all()
+
+
 def test_ratios_are_parsed_and_checked():
     r = Ratios.parse("1:2:1,2:1:2")
     assert r.spoke_fractions == (0.25, 0.75) and r.edge_fractions == (0.4, 0.6)

@@ -189,9 +189,13 @@ def _place_in_space(s: _Sections, rows: np.ndarray, vertices: np.ndarray, surfac
     (surfaces.project_points, from their (u,v)): a triangle's own points (centroid, spoke, middle and band points) at
     the barycentric coordinates they have in (u,v), on the corners; the two points of an inner edge at the edge
     fractions of its chord, once per edge (canon_a, canon_b), so both its triangles take the same."""
+    edges = np.isin(s.canon_face, s.fid[rows])
     r = np.flatnonzero(rows)
     a, b, c = s.uv[r, 0], s.uv[r, 1], s.uv[r, 2]
     m = np.stack([b - a, c - a], axis=2)  # (k, 2, 2): columns b − a, c − a
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    flat = np.abs(det) <= 1e-12 * np.abs(m).max(axis=(1, 2)) ** 2  # no area in (u,v), at a pole: points stay put
+    r, a, m = r[~flat], a[~flat], m[~flat]
     corners = vertices[s.tri[r]]
     for name in ("uc", "spoke1", "spoke2", "mid", "band1", "band2"):
         arr = getattr(s, name)
@@ -199,7 +203,6 @@ def _place_in_space(s: _Sections, rows: np.ndarray, vertices: np.ndarray, surfac
         lam = np.linalg.solve(m[:, None], (q - a[:, None])[..., None])[..., 0]  # (k, p, 2)
         bary = np.concatenate([1 - lam.sum(axis=2, keepdims=True), lam], axis=2)  # (k, p, 3)
         arr[r] = _projected(np.einsum("kpj,kjd->kpd", bary, corners), q, s.fid[r], surfaces).reshape(arr[r].shape)
-    edges = np.isin(s.canon_face, s.fid[r])
     lo, hi = vertices[s.canon_lo[edges]], vertices[s.canon_hi[edges]]
     for name, frac in zip(("canon_a", "canon_b"), s.edge_fractions, strict=True):
         arr = getattr(s, name)
