@@ -56,9 +56,8 @@ def _volume(shape) -> float:
     return props.Mass()
 
 
-def _straddling(mesh) -> int:
-    """Triangles of the folded face's side with corners on both sides of the fold's plane x = 10."""
-    c = mesh.corners
+def _straddling(c: np.ndarray) -> int:
+    """Triangles (corners (m, 3, 3)) of the folded face's side with corners on both sides of the fold's plane x = 10."""
     n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
     upright = np.abs(n[:, 2]) < 0.5 * np.linalg.norm(n, axis=1)  # not the caps
     curved = (c[:, :, 1] > 1e-6).any(axis=1)  # the curved side lies at y > 0 except at its ends and the kink
@@ -79,7 +78,7 @@ def test_a_folded_face_is_split_along_its_crease_and_meshed_across_none_of_it(me
     mesh = mesh_model(model, MeshParams(tolerance=tol, mesher=mesher)).mesh
     checks = check_mesh(mesh)
     assert checks.closed and manifold3d_accepts(mesh) and self_intersections(mesh)[0] == 0
-    assert _straddling(mesh) == 0
+    assert _straddling(mesh.corners) == 0
     assert checks.volume == pytest.approx(_volume(shape), rel=1e-3)  # OCCT's volume of the solid, not ours
     far = 0.0  # every vertex on the solid by OCCT's distance
     for p in mesh.vertices[:: max(1, len(mesh.vertices) // 200)]:
@@ -87,7 +86,7 @@ def test_a_folded_face_is_split_along_its_crease_and_meshed_across_none_of_it(me
         far = max(far, dist.Value())
     assert far <= tol
     unsplit = mesh_model(model_from_shape(shape), MeshParams(tolerance=tol, mesher=mesher)).mesh
-    assert _straddling(unsplit) > 0  # without the split the mesh cuts across the fold
+    assert _straddling(unsplit.corners) > 0  # without the split the mesh cuts across the fold
 
 
 def test_the_dtmb_hull_is_split_along_its_two_chines_and_meshed_within_tolerance():
@@ -97,3 +96,32 @@ def test_the_dtmb_hull_is_split_along_its_two_chines_and_meshed_within_tolerance
     assert result.max_error <= 0.1 and not result.unmeshed_faces
     checks = check_mesh(result.mesh)
     assert checks.nonmanifold_edges == 0 and checks.misoriented_edges == 0
+
+
+def test_a_folded_face_placed_twice_is_split_in_both_placements():
+    """One solid placed at two locations (its faces shared, as an assembly's instances): a ShapeBuild_ReShape pass
+    replaces one placement, so a second pass splits the other."""
+    from OCP.BRep import BRep_Builder
+    from OCP.gp import gp_Trsf
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS_Compound
+
+    prism = _kinked_prism()
+    both = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(both)
+    for dy in (0.0, 30.0):
+        move = gp_Trsf()
+        move.SetTranslation(gp_Vec(0, dy, 0))
+        builder.Add(both, prism.Moved(TopLoc_Location(move)))
+    split, n = split_at_creases(both)
+    model = model_from_shape(split)
+    assert n == 2 and len(model.faces) == 2 * len(model_from_shape(prism).faces) + 2
+    mesh = mesh_model(model, MeshParams(tolerance=0.01)).mesh
+    checks = check_mesh(mesh)
+    assert checks.closed and checks.shells == 2
+    assert checks.volume == pytest.approx(2 * _volume(prism), rel=1e-3)
+    c = mesh.corners
+    second = c[:, :, 1].min(axis=1) > 15
+    assert second.any() and (~second).any()
+    assert _straddling(c[~second]) == 0 and _straddling(c[second] - [0, 30, 0]) == 0  # the second moved onto the first

@@ -41,6 +41,8 @@ SAMPLES = 17
 SIDE = 1e-4
 #: an edge of a split face whose 3D curve is farther than this × its tolerance from S(pcurve) gets a new 3D curve
 PARTED = 10.0
+#: passes over the shape at most (a face placed N times takes N)
+MAX_PASSES = 8
 
 
 def knot_lines(surface: Geom_Surface) -> list[tuple[int, float]]:
@@ -97,7 +99,18 @@ def crease_angle(face: TopoDS_Face) -> float:
 def split_at_creases(shape: TopoDS_Shape) -> tuple[TopoDS_Shape, int]:
     """(shape, faces split): every face with a crease (crease_angle over CREASE_DEGREES) divided along its C0 knot
     lines, the edges it shares split with it in its neighbours too (one ShapeBuild_ReShape over the whole shape),
-    so the parts stay joined by topology; the shape unchanged, 0, when no face has a crease."""
+    so the parts stay joined by topology; the shape unchanged, 0, when no face has a crease. One face placed several
+    times (an instanced part) takes one pass per placement: a pass replaces one of them."""
+    shape, first = _split_pass(shape)  # counts every placement; a later pass only finishes what it started
+    split = first
+    for _ in range(MAX_PASSES - 1):
+        if not split:
+            break
+        shape, split = _split_pass(shape)
+    return shape, first
+
+
+def _split_pass(shape: TopoDS_Shape) -> tuple[TopoDS_Shape, int]:
     found = TopTools_IndexedMapOfShape()
     TopExp.MapShapes_s(shape, TopAbs_FACE, found)
     try:
