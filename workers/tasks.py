@@ -135,10 +135,10 @@ def run_job(job_id: str, redelivered: bool = False) -> None:
         return
     made_by = job.provenance | ({"mesh_params": result["provenance"]["params"]}
                                 if "params" in result.get("provenance", {}) else {})
-    _finish(job_id, "succeeded", progress=1.0, stage="done", artifacts=artifacts, result=result, provenance=made_by)
     fp = job.input.get("fingerprint")
-    if fp:
+    if fp:  # before the job shows as succeeded: a client told so may resubmit at once (reusable checks the status)
         st.remember_result(fp, job_id)
+    _finish(job_id, "succeeded", progress=1.0, stage="done", artifacts=artifacts, result=result, provenance=made_by)
     st.sweep()
     log.info("succeeded")
 
