@@ -30,7 +30,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
 from amprep.errors import is_occt_failure
-from amprep.geometry.cad.surfaces import surface_of, tangents
+from amprep.geometry.cad.surfaces import Surface, surface_of, tangents
 from amprep.geometry.core.vectors import cross, norms
 
 #: a knot line across which the surface normal turns by more than this is a crease
@@ -154,20 +154,26 @@ def _rebuild_parted_edges(shape: TopoDS_Shape, pieces: TopTools_IndexedMapOfShap
     0.46 mm apart on a 0.0145 mm tolerance, 1.1 mm once cut), and the face then meets its surface only within that."""
     ancestors = TopTools_IndexedDataMapOfShapeListOfShape()
     TopExp.MapShapesAndAncestors_s(shape, TopAbs_EDGE, TopAbs_FACE, ancestors)
+    faces = [TopoDS.Face_s(pieces.FindKey(i)) for i in range(1, pieces.Extent() + 1)]
+    surfaces = [surface_of(f) for f in faces]
+    edges = TopTools_IndexedMapOfShape()
+    for face in faces:
+        TopExp.MapShapes_s(face, TopAbs_EDGE, edges)
     builder = BRep_Builder()
-    for i in range(1, ancestors.Extent() + 1):
-        edge = TopoDS.Edge_s(ancestors.FindKey(i))
-        owners = [TopoDS.Face_s(f) for f in ancestors.FindFromIndex(i)]
+    for i in range(1, edges.Extent() + 1):
+        edge = TopoDS.Edge_s(edges.FindKey(i))
+        owners = [TopoDS.Face_s(f) for f in ancestors.FindFromKey(edge)] if ancestors.Contains(edge) else []
         if BRep_Tool.Degenerated_s(edge) or not owners or not all(pieces.Contains(f) for f in owners):
             continue
         tol = BRep_Tool.Tolerance_s(edge)
-        if max(_parted(edge, f) for f in owners) > PARTED * tol:
+        if max(_parted(edge, f, surfaces[pieces.FindIndex(f) - 1]) for f in owners) > PARTED * tol:
             builder.UpdateEdge(edge, None, tol)
             BRepLib.BuildCurve3d_s(edge, tol)
 
 
-def _parted(edge: TopoDS_Edge, face: TopoDS_Face) -> float:
-    """The largest distance between an edge's 3D curve and S(its pcurve on face) at the same parameters."""
+def _parted(edge: TopoDS_Edge, face: TopoDS_Face, surface: Surface) -> float:
+    """The largest distance between an edge's 3D curve and S(its pcurve on face) at the same parameters (surface:
+    the face's)."""
     first, last = BRep_Tool.Range_s(edge)
     pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
     if pcurve is None:
@@ -176,4 +182,4 @@ def _parted(edge: TopoDS_Edge, face: TopoDS_Face) -> float:
     t = np.linspace(first, last, SAMPLES)
     xyz = np.array([curve.Value(x).Coord() for x in t])
     uv = np.array([pcurve.Value(x).Coord() for x in t])
-    return float(norms(surface_of(face).evaluate(uv) - xyz).max())
+    return float(norms(surface.evaluate(uv) - xyz).max())

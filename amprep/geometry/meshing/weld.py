@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from amprep.geometry.core.checks import degenerate_mask
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -163,8 +164,6 @@ def split_caps(mesh: Mesh) -> Mesh:
     neighbour (c, a, d) become (c, b, d) and (b, a, d), which split the neighbour at b: the same surface, the cap's
     two other sides kept with their directions, so the mesh stays closed and oriented; a cap whose neighbour is
     missing, in another face, another cap's or flat itself is left."""
-    from amprep.geometry.core.checks import degenerate_mask
-
     caps = np.flatnonzero(degenerate_mask(mesh))
     if not len(caps) or mesh.n_triangles < 2:
         return mesh

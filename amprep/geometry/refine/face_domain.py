@@ -13,6 +13,7 @@ from amprep.geometry.cad.topology import Topology
 from amprep.geometry.meshing.face_mesher import boundary_loops
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.uv_cdt import inside_loops
+from amprep.geometry.refine.sma import _nearest_copy
 
 #: the loops' edges are discretised at most this far (mm) from the exact edges: a point a few µm beyond a trim is off
 #: the face (CTC-02's mitred fillets: split points 5–10 µm beyond it crossed the next fillet's triangles)
@@ -49,8 +50,5 @@ class FaceDomains:
         if known is None:
             return np.ones(len(uv), bool)
         loops, middle = known
-        pts = np.array(uv, float)
-        for d, per in enumerate(periods):
-            if per:
-                pts[:, d] += np.round((middle[d] - pts[:, d]) / per) * per
-        return inside_loops(pts, loops)
+        pts = np.asarray(uv, float)
+        return inside_loops(_nearest_copy(pts, np.broadcast_to(middle, pts.shape), periods), loops)

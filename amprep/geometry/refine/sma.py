@@ -111,12 +111,12 @@ def sma_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Su
         return Refinement(mesh, {}, np.arange(mesh.n_triangles))
     s = _Sections(mesh.triangles[sel], mesh.uv[sel], mesh.face_ids[sel], edge_id[sel], ~inner[edge_id[sel]], ratios)
     ids = _Numbering.of(s, mesh.n_vertices)
-    new_uv, new_xyz, out_tris, out_uv, out_rows = _build(s, ids, surfaces)
+    new_uv, new_face, new_xyz, out_tris, out_uv, out_rows = _build(s, ids, surfaces)
     folded = _turned_over(np.concatenate([mesh.vertices, new_xyz]), out_tris, out_rows, mesh.vertices[s.tri])
     folded &= ~_at_a_pole(s, surfaces)  # an apex's corner has a (u,v) of its triangle's choosing: space decides none
     if folded.any():  # where (u,v) shears across a triangle: its face's new points placed in space, then projected
         _place_in_space(s, np.isin(s.fid, s.fid[folded]), mesh.vertices, surfaces)
-        new_uv, new_xyz, out_tris, out_uv, out_rows = _build(s, ids, surfaces)
+        new_uv, new_face, new_xyz, out_tris, out_uv, out_rows = _build(s, ids, surfaces)
     out_parent = [sel[rows] for rows in out_rows]
 
     keep = np.setdiff1d(np.arange(mesh.n_triangles), sel)
@@ -127,7 +127,6 @@ def sma_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Su
     triangles, parent, uv_all = triangles[order], parent[order], uv_all[order]
 
     n_new = len(new_uv)
-    new_face = ids.new_points(s)[1]
     def extend(a: np.ndarray | None, fill: np.ndarray) -> np.ndarray | None:  # noqa: E306
         return None if a is None else np.concatenate([a, fill.astype(a.dtype)])
     refined = Mesh(
@@ -141,10 +140,10 @@ def sma_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Su
     return Refinement(refined, categories, parent)
 
 
-def _build(s: _Sections, ids: _Numbering, surfaces: dict[int, Surface]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray],
-                                                                            list[np.ndarray], list[np.ndarray]]:
-    """The new points' (u,v) (n, 2) and S(u,v) (n, 3), and the children: per pattern (Type I, Type II) their
-    triangles (c, 3), their corners' (u,v) (c, 3, 2) and the section row each comes from (c,)."""
+def _build(s: _Sections, ids: _Numbering, surfaces: dict[int, Surface]) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """The new points' (u,v) (n, 2), face (n,) and S(u,v) (n, 3), and the children: per pattern (Type I, Type II)
+    their triangles (c, 3), their corners' (u,v) (c, 3, 2) and the section row each comes from (c,)."""
     new_uv, new_face = ids.new_points(s)
     new_xyz = np.empty((len(new_uv), 3))
     for f in np.unique(new_face):
@@ -157,7 +156,7 @@ def _build(s: _Sections, ids: _Numbering, surfaces: dict[int, Surface]) -> tuple
         out_tris.append(lab[rows, cols][:, pattern].reshape(-1, 3))  # (s, p, 3)
         out_uv.append(lab_uv[rows, cols][:, pattern].reshape(-1, 3, 2))  # (s, p, 3, 2)
         out_rows.append(np.repeat(rows, len(pattern)))
-    return new_uv, new_xyz, out_tris, out_uv, out_rows
+    return new_uv, new_face, new_xyz, out_tris, out_uv, out_rows
 
 
 def _turned_over(xyz: np.ndarray, out_tris: list[np.ndarray], out_rows: list[np.ndarray],
