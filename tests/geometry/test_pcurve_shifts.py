@@ -121,3 +121,66 @@ def test_a_wire_occts_explorer_stops_in_is_walked_whole(tmp_path, monkeypatch, m
     monkeypatch.setattr(face_mesher, "wire_edges", _explorer_edges)
     r = mesh_model(read.read_cad(tmp_path / "torus.brep"), params)
     assert not check_mesh(r.mesh).closed or r.unmeshed_faces != ()
+
+
+def _cylinder_closed_by_false_degenerates(path) -> None:  # type: ignore[no-untyped-def]
+    """The cylinder's lateral face spanning 2 periods in (u,v), its loop closed as STEP healing closed KiCad's
+    transformer's: the seam's up pcurve and the top circle's moved a period on, two edges flagged degenerated (each at
+    a seam vertex, each one period along a circle) joining them."""
+    import cadquery as cq
+    from OCP.Geom2d import Geom2d_Line
+    from OCP.gp import gp_Dir2d, gp_Pnt2d
+    from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
+    from OCP.TopExp import TopExp
+    from OCP.TopoDS import TopoDS_Edge
+
+    solid = cq.Solid.makeCylinder(5, 10).wrapped
+    face = next(f for f in explore(solid, TopAbs_FACE, TopoDS.Face_s) if BRep_Tool.Surface_s(f).IsUPeriodic())
+    builder, period = BRep_Builder(), 2 * np.pi
+    shift = gp_Vec2d(period, 0)
+    for e in face_edges(face):
+        a, b = BRep_Tool.Range_s(e)
+        if BRep_Tool.IsClosed_s(e, face):
+            if e.Orientation() == TopAbs_FORWARD:
+                c1 = BRep_Tool.CurveOnSurface_s(e, face, a, b)
+                c2 = BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(e.Reversed()), face, a, b)
+                c1, c2 = (c1.Translated(shift), c2) if c1.Value(a).X() > 1 else (c1, c2.Translated(shift))
+                builder.UpdateEdge(e, c1, c2, face, BRep_Tool.Tolerance_s(e))
+        elif abs(BRep_Tool.CurveOnSurface_s(e, face, a, b).Value(a).Y() - 10) < 1e-9:  # the top circle
+            builder.UpdateEdge(e, BRep_Tool.CurveOnSurface_s(e, face, a, b).Translated(shift), face,
+                               BRep_Tool.Tolerance_s(e))
+    seam = next(e for e in face_edges(face) if BRep_Tool.IsClosed_s(e, face))
+    wire = explore(face, TopAbs_WIRE, TopoDS.Wire_s)[0]
+    wire.Free(True)
+    for v, start, direction in ((0.0, period, 1.0), (10.0, period, -1.0)):
+        vertex = next(x for x in (TopExp.FirstVertex_s(seam), TopExp.LastVertex_s(seam))
+                      if abs(BRep_Tool.Pnt_s(x).Z() - v) < 1e-9)
+        edge = TopoDS_Edge()
+        builder.MakeEdge(edge)
+        builder.UpdateEdge(edge, Geom2d_Line(gp_Pnt2d(start, v), gp_Dir2d(direction, 0)), face, 1e-7)
+        builder.Range(edge, face, 0.0, period)
+        builder.Degenerated(edge, True)
+        builder.Add(edge, vertex.Oriented(TopAbs_FORWARD))
+        builder.Add(edge, vertex.Oriented(TopAbs_REVERSED))
+        builder.Add(wire, edge)
+    BRepTools.Write_s(solid, str(path))
+
+
+def _face_area(mesh, face_id: int) -> float:  # type: ignore[no-untyped-def]
+    c = mesh.corners[mesh.face_ids == face_id]
+    return float(0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1).sum())
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_a_loop_closed_by_false_degenerated_edges_is_one_period(tmp_path, monkeypatch, mesher):
+    _cylinder_closed_by_false_degenerates(tmp_path / "wound.brep")
+    model = read.read_cad(tmp_path / "wound.brep")
+    side = next(i for i, f in enumerate(model.faces) if BRep_Tool.Surface_s(f).IsUPeriodic())
+    r = mesh_model(model, MeshParams(tolerance=0.01, mesher=mesher))
+    assert check_mesh(r.mesh).closed and r.unmeshed_faces == ()
+    assert _face_area(r.mesh, side) == pytest.approx(2 * np.pi * 5 * 10, rel=2e-3)  # once round, not twice
+    assert _worst_distance(model, r.mesh, samples=300) <= 0.01 * 1.001
+
+    monkeypatch.setattr(read, "fix_shifted_pcurves", lambda shape: 0)  # as read before: the band meshed twice over
+    r = mesh_model(read.read_cad(tmp_path / "wound.brep"), MeshParams(tolerance=0.01, mesher=mesher))
+    assert _face_area(r.mesh, side) > 1.5 * 2 * np.pi * 5 * 10 or not check_mesh(r.mesh).closed

@@ -4,7 +4,11 @@ u = +2π, its circles' from 0 to −2π and from 0 to 2π) has no closed loop in
 triangulation and a (u,v) mesher meshes a polygon that is not the face (750× the tolerance on a cylinder so broken).
 OCCT's STEP healing leaves it, and ShapeFix_Wire.FixShifted swaps such a seam's pcurves into another open loop;
 here each wire is walked edge to edge through its vertices and each pcurve moved by the whole periods that make its
-start its predecessor's end, kept only where the loop then closes.
+start its predecessor's end, kept only where the loop then closes. The STEP healing may first have closed such a
+loop with "degenerated" edges whose pcurves run whole periods along a circle of non-zero radius (the transformer's
+sixth such face: two of them, each 2 periods long, so the face's (u,v) spans 3 periods and its mesh covers the band
+3 times over); an edge flagged degenerate whose points on the surface are not its vertex is dropped from the wire
+before the walk, kept only where the loop then closes.
 """
 
 from __future__ import annotations
@@ -24,6 +28,9 @@ MAX_EDGES = 1000
 #: a loop is open by a period where an edge's (u,v) end is farther than this share of the period from its successor's
 #: start, and closed where every end is within it
 GAP_SHARE = 0.25
+#: a degenerated edge is false where a point of its pcurve lies on the surface farther than this × its vertex's
+#: tolerance (and 1e-6 mm) from its vertex
+FALSE_DEGENERATE = 10.0
 
 
 def fix_shifted_pcurves(shape: TopoDS_Shape) -> int:
@@ -39,8 +46,51 @@ def fix_shifted_pcurves(shape: TopoDS_Shape) -> int:
         if not period.any():
             continue
         for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
-            fixed += shift_wire(face, wire, period)
+            # the loop closed without false degenerated edges is shifted already; else the wire is shifted as it is
+            fixed += without_false_degenerates(face, wire, surface, period) or shift_wire(face, wire, period)
     return fixed
+
+
+def _false_degenerate(face: TopoDS_Face, edge: TopoDS_Edge, surface: BRepAdaptor_Surface) -> bool:
+    """True for an edge flagged degenerated whose pcurve's points (9 of them) on the surface lie farther than
+    FALSE_DEGENERATE × its vertex's tolerance from the vertex: a loop closed in (u,v) by an edge that is no point."""
+    if not BRep_Tool.Degenerated_s(edge):
+        return False
+    pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+    if pcurve is None:
+        return False
+    vertex = TopExp.FirstVertex_s(edge)
+    at = np.array(BRep_Tool.Pnt_s(vertex).Coord())
+    a, b = BRep_Tool.Range_s(edge)
+    pts = np.array([surface.Value(*pcurve.Value(float(t)).Coord()).Coord() for t in np.linspace(a, b, 9)])
+    far = max(FALSE_DEGENERATE * BRep_Tool.Tolerance_s(vertex), 1e-6)
+    return bool(np.linalg.norm(pts - at, axis=1).max() > far)
+
+
+def without_false_degenerates(face: TopoDS_Face, wire: TopoDS_Wire, surface: BRepAdaptor_Surface,
+                              period: np.ndarray) -> bool:
+    """True when `wire` had false degenerated edges (_false_degenerate) and the loop of its other edges closes with
+    whole-period shifts: the face then holds a new wire of those edges, shifted (shift_wire); False, face untouched."""
+    edges = explore(wire, TopAbs_EDGE, TopoDS.Edge_s)
+    keep = [e for e in edges if not _false_degenerate(face, e, surface)]
+    if len(keep) == len(edges) or not keep:
+        return False
+    ends = _all_ends(face, keep)
+    if ends is None or _walk(face, keep, ends, period, GAP_SHARE * period[period > 0].min()) is None:
+        return False
+    builder = BRep_Builder()
+    new = TopoDS_Wire()
+    builder.MakeWire(new)
+    for edge in keep:
+        builder.Add(new, edge)
+    new.Orientation(wire.Orientation())
+    free = face.Free()
+    face.Free(True)
+    builder.Remove(face, wire)
+    builder.Add(face, new)
+    face.Free(free)
+    shift_wire(face, new, period)
+    return True
 
 
 def _ends(face: TopoDS_Face, edge: TopoDS_Edge) -> tuple[np.ndarray, np.ndarray] | None:
