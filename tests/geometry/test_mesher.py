@@ -334,7 +334,7 @@ def test_a_face_of_no_width_keeps_its_edges_uncut_and_is_meshed(monkeypatch):
     from OCP.TopoDS import TopoDS
 
     from amprep.geometry.cad.topology import compound
-    from amprep.geometry.meshing import face_mesher
+    from amprep.geometry.meshing import shared_edges
 
     va, vb, vc = (BRepBuilderAPI_MakeVertex(gp_Pnt(*p)).Vertex() for p in ((0, 0, 0), (10, 0, 0), (5, 0.5, 0)))
     ab, ba = BRepBuilderAPI_MakeEdge(va, vb).Edge(), BRepBuilderAPI_MakeEdge(vb, va).Edge()
@@ -354,9 +354,31 @@ def test_a_face_of_no_width_keeps_its_edges_uncut_and_is_meshed(monkeypatch):
     assert r.unmeshed_faces == ()
     on_ab = r.mesh.vertices[np.abs(r.mesh.vertices[:, 1]) < 1e-12]
     assert len(on_ab) <= 3, "the no-width face's edges were cut"
-    monkeypatch.setattr(face_mesher, "SLIVER", -1.0)  # the rule off: cut, and the face is left unmeshed
+    monkeypatch.setattr(shared_edges, "SLIVER", -1.0)  # the rule off: cut, and the face is left unmeshed
     r = mesh_model(model, MeshParams(tolerance=0.01, mesher="quality"))
     assert r.unmeshed_faces != ()
+
+
+def test_a_solid_under_the_collapse_length_keeps_its_edges_and_is_meshed(monkeypatch):
+    """A 0.5 µm cube beside a 10 mm one, meshed at 0.1 mm by the quality mesher: its edges are under the 1 µm
+    (0.01 × tolerance) that collapses an edge, but its faces keep them (their perimeters are under 8 such lengths),
+    so both solids come out closed, the small one with its 12 triangles and its volume."""
+    import cadquery as cq
+
+    from amprep.geometry.meshing import shared_edges
+
+    small = cq.Solid.makeBox(5e-4, 5e-4, 5e-4, cq.Vector(20, 0, 0))
+    model = model_from_shape(cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), small]).wrapped)
+    r = mesh_model(model, MeshParams(tolerance=0.1, mesher="quality"))
+    checks = check_mesh(r.mesh)
+    assert r.unmeshed_faces == () and checks.closed and checks.shells == 2
+    assert checks.volume == pytest.approx(1000 + 5e-4 ** 3, rel=1e-12)
+    assert (r.mesh.corners[:, :, 0] > 15).all(axis=1).sum() == 12
+
+    monkeypatch.setattr(shared_edges, "TINY_FACE", 0.0)  # the rule off: the small cube's faces collapse whole
+    r = mesh_model(model_from_shape(cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), small]).wrapped),
+                   MeshParams(tolerance=0.1, mesher="quality"))
+    assert r.unmeshed_faces != () or check_mesh(r.mesh).shells == 1
 
 
 def test_a_circle_brepmesh_collapses_onto_its_vertex_is_cut_and_its_disc_meshed(monkeypatch):

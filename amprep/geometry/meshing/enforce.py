@@ -18,21 +18,20 @@ from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.progress import Progress, ProgressFn
 from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
-from amprep.geometry.meshing.face_mesher import (
-    boundary_loops,
-    collapse_short_edges,
-    discretize_missing_edges,
-    edge_length,
-    grade_edges,
-    has_pole,
-    mesh_face,
-    split_edge_to_tolerance,
-)
+from amprep.geometry.meshing.face_mesher import boundary_loops, mesh_face
 from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
 from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
 from amprep.geometry.meshing.occt_check import patch_error
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.shared_edges import (
+    collapse_short_edges,
+    discretize_missing_edges,
+    edge_length,
+    grade_edges,
+    has_pole,
+    split_edge_to_tolerance,
+)
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING
 from amprep.geometry.parallel.face_pool import map_faces
 

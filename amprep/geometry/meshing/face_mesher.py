@@ -5,19 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 from OCP.BRep import BRep_Tool
-from OCP.BRepAdaptor import BRepAdaptor_Curve
-from OCP.BRepGProp import BRepGProp
 from OCP.BRepTools import BRepTools_WireExplorer
-from OCP.GCPnts import GCPnts_TangentialDeflection
-from OCP.GProp import GProp_GProps
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.pcurve_shifts import ordered_edges
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
-from amprep.geometry.core.vectors import cross
+from amprep.geometry.cad.topology import Topology, explore, winds_inward
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.meshing.local_refine import (
     flip_flat_triangles,
@@ -27,9 +22,9 @@ from amprep.geometry.meshing.local_refine import (
     unfold,
 )
 from amprep.geometry.meshing.occt_read import FacePatch
+from amprep.geometry.meshing.shared_edges import ANALYTIC, discretize_missing_edges, has_pole
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
-    MIN_SPACING,
     apart,
     insertion_points,
     inside_loops,
@@ -43,224 +38,6 @@ from amprep.geometry.meshing.uv_cdt import (
 )
 from amprep.geometry.meshing.uv_seed import clear_poles, curvature_seeds
 from amprep.geometry.meshing.weld import pole_folds
-
-
-def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
-    """(n,) sorted parameters of an edge with no mesh yet, at the chord tolerance and angle (OCCT's GCPnts)."""
-    first, last = BRep_Tool.Range_s(edge)
-    if BRep_Tool.Degenerated_s(edge):
-        return np.linspace(first, last, 9)
-    curve = BRepAdaptor_Curve(edge)
-    disc = GCPnts_TangentialDeflection(curve, angular, tolerance, 3)
-    params = np.array([disc.Parameter(i) for i in range(1, disc.NbPoints() + 1)])
-    params = np.unique(np.clip(np.concatenate([[first, last], params]), first, last))
-    # GCPnts may return a parameter a hair from an end (seen: 2e-6 mm on CTC-02): a segment that short makes a
-    # needle with any third point; drop interior points nearer than MIN_SPACING × tolerance to the point before
-    # them or to the end
-    pts = np.array([curve.Value(t).Coord() for t in params])
-    eps = MIN_SPACING * tolerance
-    if (np.linalg.norm(np.diff(pts, axis=0), axis=1) > eps).all() and (
-            np.linalg.norm(pts[-1] - pts[1:-1], axis=1) > eps).all():
-        return params  # the usual case: no point too near another, nothing to walk
-    keep = np.ones(len(params), bool)
-    last_kept = pts[0]
-    for i in range(1, len(params) - 1):  # a drop moves the reference point: sequential, on the rare edge
-        if np.linalg.norm(pts[i] - last_kept) <= eps or np.linalg.norm(pts[-1] - pts[i]) <= eps:
-            keep[i] = False
-        else:
-            last_kept = pts[i]
-    return params[keep]
-
-
-def edge_sagitta(edge: TopoDS_Edge, params: np.ndarray) -> np.ndarray:
-    """(n−1,) max distance from the edge curve at 1/4, 1/2, 3/4 of each parameter segment to its chord."""
-    curve = BRepAdaptor_Curve(edge)
-    pts = np.array([curve.Value(t).Coord() for t in params])
-    fr = np.array([0.25, 0.5, 0.75])
-    mids = params[:-1, None] + fr[None, :] * np.diff(params)[:, None]
-    mid_pts = np.array([curve.Value(t).Coord() for t in mids.ravel()]).reshape(-1, 3, 3)
-    a, b = pts[:-1, None], pts[1:, None]
-    ab = b - a
-    len2 = np.maximum((ab * ab).sum(-1), 1e-300)
-    s = np.clip(((mid_pts - a) * ab).sum(-1) / len2, 0, 1)
-    return np.linalg.norm(mid_pts - (a + s[..., None] * ab), axis=-1).max(axis=1)
-
-
-def split_edge_to_tolerance(edge: TopoDS_Edge, params: np.ndarray, tolerance: float, rounds: int = 12) -> np.ndarray:
-    """Edge parameters with every segment whose sagitta exceeds the tolerance halved, until none does."""
-    if BRep_Tool.Degenerated_s(edge):
-        return params
-    for _ in range(rounds):
-        bad = edge_sagitta(edge, params) > tolerance
-        if not bad.any():
-            break
-        params = np.sort(np.concatenate([params, 0.5 * (params[:-1][bad] + params[1:][bad])]))
-    return params
-
-
-def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> None:
-    """Give every edge of the face with no discretisation yet its own (discretize_edge), in topo.edge_params."""
-    for edge in face_edges(face):
-        ei = topo.edge_index(edge)
-        if ei not in topo.edge_params:
-            topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
-
-
-def edge_length(edge: TopoDS_Edge, params: np.ndarray) -> float:
-    """The length of an edge's discretisation at params (n,): Σ of its chords."""
-    return float(np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1).sum())
-
-
-def collapse_short_edges(faces: list[TopoDS_Face], topo: Topology, shortest: float) -> None:
-    """Identify the two vertices of every edge of `faces` whose discretised length is under `shortest` (a CAD edge of
-    a few µm: kept, its triangles collapse to slivers that a float32 STL makes degenerate), by topology
-    (Topology.merge_vertices, as BRepMesh collapses an edge under its min size): the weld then drops the triangles
-    that collapse with it, on both faces."""
-    for face in faces:
-        for edge in face_edges(face):
-            ei, v1, _, v2, _, degenerate = topo.edge_facts(edge)
-            params = topo.edge_params.get(ei)
-            if degenerate or params is None or v1 == v2:
-                continue
-            if edge_length(edge, params) < shortest:
-                topo.merge_vertices(v1, v2)
-                topo.edge_params[ei] = params[[0, -1]]
-
-
-# ---- the quality mesher's edge grading
-# A triangle with good angles on a segment of length s is about 0.87 s high; a face narrower than that (a chamfer
-# strip, a short cylinder band, a plate's long side) can only hold skinny triangles on it, and Triangle may not
-# split a shared edge to mend them. So, before any face of the quality mesher is meshed, each face's width is taken
-# as w = 2A/P (its area over half its perimeter: b for an a × b strip with a ≫ b, the height of a cylinder band)
-# and every segment of the shared edge discretisation longer than GRADE × the smaller width of its two faces is cut
-# into equal parameter steps. The edges stay shared: both faces see the same points.
-
-#: a boundary segment may be at most this many times the width of its narrower face
-GRADE = 3.0
-#: surface types (Surface.surface_type) whose (u,v) maps boundary lines and circles to lines in (u,v)
-ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
-#: a boundary segment may be at most its distance from the nearer end × this, plus the shortest segment there
-GROWTH = 1.0
-#: and is cut into at most this many parts (a sliver face's width can be near zero)
-MAX_PARTS = 64
-#: a face narrower (face_width) than this × the chord tolerance has no width: its edges are not cut
-SLIVER = 1e-3
-#: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
-UV_STRAIGHT = 1e-6
-
-
-def _edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
-    curve = BRepAdaptor_Curve(edge)
-    return np.array([curve.Value(float(t)).Coord() for t in params]).reshape(-1, 3)
-
-
-def _straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
-    """True when the edge is a straight line in space (whatever its curve type: a STEP may store a line as a B-spline):
-    its points at the ends, the middle and the quarters lie within 1e-6 × its chord of the chord."""
-    t = np.interp([0, 0.25, 0.5, 0.75, 1], [0, 1], [params[0], params[-1]])
-    p = _edge_points(edge, t)
-    chord = p[-1] - p[0]
-    length = float(np.linalg.norm(chord))
-    if length <= 0:
-        return False
-    off = cross(p - p[0], chord / length)
-    return bool(np.linalg.norm(off, axis=1).max() <= 1e-6 * length)
-
-
-def _curved_in_uv(edge, face: TopoDS_Face, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
-    """True when the edge's pcurve on the face is not a straight line in (u,v): its points at the ends, the middle and
-    the quarters farther than UV_STRAIGHT × its (u,v) chord from that chord (True where it has no pcurve)."""
-    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-    if pc is None:
-        return True
-    t = np.interp([0, 0.25, 0.5, 0.75, 1], [0, 1], [params[0], params[-1]])
-    uv = np.array([[q.X(), q.Y()] for q in (pc.Value(float(x)) for x in t)])
-    chord = uv[-1] - uv[0]
-    length = float(np.linalg.norm(chord))
-    if length <= 0:
-        return True
-    off = (uv[:, 0] - uv[0, 0]) * chord[1] - (uv[:, 1] - uv[0, 1]) * chord[0]
-    return bool(np.abs(off).max() > UV_STRAIGHT * length * length)
-
-
-def face_width(face: TopoDS_Face, topo: Topology) -> float:
-    """2A/P of a face: its area (OCCT's surface integral) over half its perimeter (its edges' discretisations)."""
-    props = GProp_GProps()
-    BRepGProp.SurfaceProperties_s(face, props)
-    perimeter = 0.0
-    for edge in face_edges(face):
-        if BRep_Tool.Degenerated_s(edge):
-            continue
-        params = topo.edge_params.get(topo.edge_index(edge))
-        if params is not None and len(params) > 1:
-            perimeter += edge_length(edge, params)
-    return 2 * abs(props.Mass()) / perimeter if perimeter > 0 else np.inf
-
-
-def split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
-    """Sorted params (n,) with segment i cut into parts[i] (n−1,) equal parameter steps."""
-    new = [params[-1:]]
-    for k in np.unique(parts):
-        rows = parts == k
-        new.append((params[:-1][rows, None] + np.diff(params)[rows, None] * (np.arange(k) / k)[None, :]).ravel())
-    return np.unique(np.concatenate(new))
-
-
-def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floor: float = 0.0) -> None:
-    """Cut the discretised edges of `faces` (surface types `kinds`; their params in topo.edge_params) where a
-    segment is longer than GRADE × the narrower width of the faces it bounds, or than GROWTH × its distance from the
-    nearer end plus the shortest segment at that end's vertex (over every edge there): a long segment beside a
-    short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends;
-    not on a straight edge of a free-form face). No size is set
-    below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
-    cap: dict[int, tuple[float, object]] = {}
-    straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face, or of one
-    # with a pole: their points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
-    # not cut: the edges of a face of no width (two edges on one line, out and back, as FreeCAD's SOD-323 has): a
-    # point cut into one would have no partner on the other, and the face no room for triangles to join them
-    frozen: set[int] = set()
-    for face, kind in zip(faces, kinds, strict=True):
-        w, pole = face_width(face, topo), has_pole(face)
-        for edge in face_edges(face):
-            if BRep_Tool.Degenerated_s(edge):
-                continue
-            ei = topo.edge_index(edge)
-            if w <= SLIVER * floor:
-                frozen.add(ei)
-            if (kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei])
-                    and (pole or _curved_in_uv(edge, face, topo.edge_params[ei]))):
-                straight.add(ei)
-            if ei in topo.edge_params and (ei not in cap or GRADE * w < cap[ei][0]):
-                cap[ei] = (GRADE * w, edge)
-    for _ in range(2):
-        points = {ei: _edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
-                  if len(topo.edge_params[ei]) >= 2}
-        at_vertex: dict[int, float] = {}
-        for ei, pts in points.items():
-            seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-            v1, _, v2, _ = topo.edge_ends(cap[ei][1])  # type: ignore[arg-type]
-            for v, s in ((v1, seg[0]), (v2, seg[-1])):
-                at_vertex[v] = min(at_vertex.get(v, np.inf), float(s))
-        for ei, pts in points.items():
-            limit, edge = cap[ei]
-            seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-            along = np.concatenate([[0.0], np.cumsum(seg)])
-            mid = (along[:-1] + along[1:]) / 2
-            v1, _, v2, _ = topo.edge_ends(edge)  # type: ignore[arg-type]
-            size = np.minimum(at_vertex[v1] + GROWTH * mid, at_vertex[v2] + GROWTH * (along[-1] - mid))
-            if ei in straight:
-                size = np.full_like(seg, np.inf)
-            if np.isfinite(limit) and limit > 0:
-                size = np.minimum(size, limit)
-            size = np.maximum(size, floor)
-            parts = np.minimum(np.ceil(seg / np.maximum(size, 1e-12)), MAX_PARTS).astype(np.int64)
-            if (parts > 1).any() and ei not in frozen:
-                topo.edge_params[ei] = split_segments(topo.edge_params[ei], parts)
-
-
-def has_pole(face: TopoDS_Face) -> bool:
-    """True when the face has a degenerated edge (a pole or apex: a line of its (u,v) maps to one point)."""
-    return any(BRep_Tool.Degenerated_s(e) for e in face_edges(face))
 
 
 def pole_runs(loops: list[dict]) -> list[np.ndarray]:  # type: ignore[type-arg]

@@ -16,9 +16,9 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
-from amprep.geometry.meshing.face_mesher import has_pole, split_segments
 from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
+from amprep.geometry.meshing.shared_edges import has_pole, split_segments
 from amprep.geometry.meshing.uv_cdt import surface_speeds
 from amprep.geometry.meshing.uv_seed import DIFF_STEP, second_form
 

@@ -26,9 +26,8 @@ from amprep.geometry.meshing.enforce import FaceStates, enforce_tolerance
 from amprep.geometry.meshing.occt_check import first_look
 from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arrays
 from amprep.geometry.meshing.params import MeshParams
-from amprep.geometry.meshing.prepare import Prepared, prepare
+from amprep.geometry.meshing.prepare import Prepared, bbox_diagonal, prepare
 from amprep.geometry.meshing.read_ahead import read_and_prepare_ahead
-from amprep.geometry.meshing.tolerance import bbox_diagonal
 from amprep.geometry.meshing.weld import orient_stored_shells, split_caps, weld
 
 
