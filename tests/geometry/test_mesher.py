@@ -454,3 +454,22 @@ def test_a_cap_of_three_nodes_on_one_line_is_split_into_its_neighbour():
     assert sorted(map(tuple, np.sort(out.triangles[:2], axis=1))) == [(0, 2, 3), (1, 2, 3)]
     assert np.allclose(out.uv[..., 0], out.vertices[out.triangles][..., 0])  # each corner keeps its own (u,v)
     assert check_mesh(split_caps(mesh_of([0, 1, 0, 0]))).degenerate_triangles == 1  # the neighbour is another face's
+
+
+def test_a_face_the_quality_path_fails_on_is_meshed_as_the_default_meshes_its_own(reference_solids, monkeypatch):
+    """The quality mesher's Delaunay refinement failing on every face (forced): each face is meshed from its boundary
+    and refinement alone, as the default mesher's own faces are, reported `fallback`, closed and within tolerance."""
+    from amprep.errors import AmprepError, ErrorCode
+    from amprep.geometry.meshing import face_mesher
+
+    def fails(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise AmprepError(ErrorCode.MESHING_FAILED, "forced")
+
+    monkeypatch.setattr(face_mesher, "quality_pslg", fails)
+    monkeypatch.setattr(face_mesher, "curvature_seeds", fails)
+    model = model_from_shape(reference_solids["filleted_block"])
+    r = mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", own_large_faces=True))
+    lattice = {f.id for f in r.mesh.faces if f.meshed_by == "lattice"}
+    assert r.unmeshed_faces == () and check_mesh(r.mesh).closed
+    assert {f.meshed_by for f in r.mesh.faces if f.id not in lattice} == {"fallback"}
+    assert float(r.face_error.max()) <= 0.01

@@ -122,3 +122,32 @@ def test_a_sliver_face_costs_the_quality_mesher_little_memory():
         tracemalloc.stop()
     assert peak < 50e6, f"{peak / 1e6:.0f} MB"
     assert r.mesh.n_triangles > 0 and r.max_error <= 0.1
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_a_cancel_seen_while_a_face_is_meshed_stops_the_meshing(reference_solids, monkeypatch, mesher):
+    """A cancel raised at a checkpoint inside our face mesher ends mesh_model with `cancelled`; it is not taken for
+    a face that failed (which would leave it unmeshed and carry on)."""
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.core.progress import checking, checkpoint
+    from amprep.geometry.meshing import enforce
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
+
+    started = []
+    real = enforce.mesh_face
+
+    def meshing(*args, **kwargs):  # type: ignore[no-untyped-def]
+        started.append(1)
+        checkpoint()
+        return real(*args, **kwargs)
+
+    def cancel() -> None:
+        if started:
+            raise AmprepError(ErrorCode.CANCELLED, "the job was cancelled")
+
+    monkeypatch.setattr(enforce, "mesh_face", meshing)
+    model = model_from_shape(reference_solids["filleted_block"])
+    with checking(cancel), pytest.raises(AmprepError) as e:
+        mesh_model(model, MeshParams(tolerance=0.01, mesher=mesher, force_fallback=True, parallel=False))
+    assert e.value.code == ErrorCode.CANCELLED and started

@@ -137,7 +137,9 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
                     return lattice
             return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
                              f.params.angular, f.params.check_order, seeds, f.min_area, quality=f.params.quality)
-        except AmprepError:
+        except AmprepError as exc:
+            if exc.code != ErrorCode.MESHING_FAILED:  # a cancel seen at a checkpoint stops the job, not the face
+                raise
             return None
 
     for i, patch in _costliest_first(remesh_face, remesh, f.patches, f.errors, target).items():

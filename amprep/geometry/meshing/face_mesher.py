@@ -112,13 +112,20 @@ def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface,
     """_mesh_face. A face with a pole whose quality mesh folds there (weld.pole_folds: a point joined to two of the
     pole's nodes, one point in space, on either side of another) is meshed again without the row along its pole's
     line (uv_seed.clear_poles: refinement can still insert between the two), then, if that folds too, as before the
-    quality mesher, from its boundary and refinement alone."""
+    quality mesher, from its boundary and refinement alone; so is a face the quality path fails on (MESHING_FAILED).
+    Any other error (a cancel seen at a checkpoint) is raised."""
     args = (face_id, face, topo, surface, tolerance, angular, order, seeds, min_area)
-    pole = quality and has_pole(face)
-    for rows in (True, False) if pole else (True,):
-        patch = _mesh_face(*args, curvature_sized, quality, pole_rows=rows)
-        if not (pole and patch.meshed_by == "quality" and pole_folds(patch)):
-            return patch
+    if not quality:
+        return _mesh_face(*args, curvature_sized, False)
+    pole = has_pole(face)
+    try:
+        for rows in (True, False) if pole else (True,):
+            patch = _mesh_face(*args, curvature_sized, True, pole_rows=rows)
+            if not (pole and patch.meshed_by == "quality" and pole_folds(patch)):
+                return patch
+    except AmprepError as exc:
+        if exc.code != ErrorCode.MESHING_FAILED:
+            raise
     return _mesh_face(*args, False, False)
 
 
