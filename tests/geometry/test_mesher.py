@@ -473,3 +473,32 @@ def test_a_face_the_quality_path_fails_on_is_meshed_as_the_default_meshes_its_ow
     assert r.unmeshed_faces == () and check_mesh(r.mesh).closed
     assert {f.meshed_by for f in r.mesh.faces if f.id not in lattice} == {"fallback"}
     assert float(r.face_error.max()) <= 0.01
+
+
+def _lens(length: float = 2.2, radius: float = 0.1):  # type: ignore[no-untyped-def]
+    """A sliver solid: the lens between a 90° arc of `radius` and its chord (0.029 mm thick), extruded `length` mm;
+    the chord's plane and the arc's cylinder share both long edges."""
+    import cadquery as cq
+
+    a = np.radians(45)
+    p1, p2 = (radius * np.cos(a), -radius * np.sin(a)), (radius * np.cos(a), radius * np.sin(a))
+    return cq.Workplane("XY").moveTo(*p1).threePointArc((radius, 0), p2).close().extrude(length).val().wrapped
+
+
+def test_two_faces_closer_than_the_tolerance_are_pinched_not_left_non_manifold(monkeypatch):
+    """At 0.1 mm the lens's plane and cylinder are each within tolerance as a strip straight across from one long edge
+    to the other, on the same graded nodes: four triangles on each such edge. The strip both cover is dropped from
+    both, the solid pinched to zero thickness there (its two ends left as two shells): closed, and each triangle left
+    within tolerance by OCCT."""
+    from amprep.geometry.meshing import pipeline
+    from tests.geometry.test_independent_distance import _worst_distance
+
+    model = model_from_shape(_lens())
+    r = mesh_model(model, MeshParams(tolerance=0.1, mesher="quality"))
+    checks = check_mesh(r.mesh)
+    assert checks.closed and checks.shells == 2 and r.unmeshed_faces == ()
+    assert _worst_distance(model, r.mesh, samples=200) <= 0.1
+    assert 0 < checks.volume < 0.00628  # the lens's own volume: (π/4 − 1/2) r² × 2.2
+
+    monkeypatch.setattr(pipeline, "pinch_double_sheets", lambda mesh: mesh)
+    assert check_mesh(mesh_model(model, MeshParams(tolerance=0.1, mesher="quality")).mesh).nonmanifold_edges > 0

@@ -28,7 +28,7 @@ from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arra
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import Prepared, bbox_diagonal, prepare
 from amprep.geometry.meshing.read_ahead import read_and_prepare_ahead
-from amprep.geometry.meshing.weld import orient_stored_shells, split_caps, weld
+from amprep.geometry.meshing.weld import orient_stored_shells, pinch_double_sheets, split_caps, weld
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,7 +130,8 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
         for i in range(n_faces)
     )
     prog("welding", 0.95)
-    mesh = split_caps(orient_stored_shells(weld([p for p in patches if p is not None], infos, topo.vertex_roots())))
+    mesh = pinch_double_sheets(split_caps(orient_stored_shells(weld([p for p in patches if p is not None], infos,
+                                                                    topo.vertex_roots()))))
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))), prepared.estimated)

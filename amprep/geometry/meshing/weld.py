@@ -193,3 +193,59 @@ def split_caps(mesh: Mesh) -> Mesh:
             uc, ua, ub, ud = uv[nb, j], uv[nb, (j + 1) % 3], uv[t, (k + 2) % 3], uv[nb, (j + 2) % 3]
             uv[t], uv[nb] = np.stack([uc, ub, ud]), np.stack([ub, ua, ud])
     return mesh.with_arrays(triangles=tris, uv=uv) if used else mesh
+
+
+def pinch_double_sheets(mesh: Mesh) -> Mesh:
+    """The mesh with each double sheet pinched: two faces thinner apart than the tolerance (a sliver between a chamfer
+    and a fillet that share both long edges: KiCad's Molex PicoBlade at 0.1 mm), each meshed within it as a strip
+    straight across, share inner edges (each used twice by both faces: four triangles on one edge). The triangles of
+    those two faces whose three corners all lie on such shared edges cover the same strip both ways: both sets are
+    dropped, kept only where every edge they leave is then used by no triangle or by two running opposite ways (the
+    sheet closed, of zero thickness within the tolerance). Only triangles with every corner on a B-rep edge or vertex
+    are searched (a strip straight across has no inner node)."""
+    if mesh.n_triangles < 4 or mesh.vertex_dim is None:
+        return mesh
+    from amprep.geometry.core.edges import edge_codes, edge_incidence
+
+    rim = np.flatnonzero((mesh.vertex_dim != IN_FACE)[mesh.triangles].all(axis=1))
+    if len(rim) < 3:
+        return mesh
+    inc = edge_incidence(mesh.triangles[rim])
+    n = np.int64(mesh.n_vertices)
+    suspects = np.sort(inc.edges[inc.count >= 3, 0] * n + inc.edges[inc.count >= 3, 1])  # a shared rung: 3 or 4 here
+    if not len(suspects):
+        return mesh
+    codes = edge_codes(mesh.triangles, n).ravel()  # side k of triangle t at 3t + k, corner k → k + 1
+    at = np.flatnonzero(np.isin(codes, suspects))
+    pairs: dict[tuple[int, int], list[int]] = {}
+    for code in suspects.tolist():  # a few edges: two triangles from each of two faces
+        faces, uses = np.unique(mesh.face_ids[at[codes[at] == code] // 3], return_counts=True)
+        if len(faces) == 2 and (uses == 2).all() and faces.min() >= 0:
+            pairs.setdefault((int(faces[0]), int(faces[1])), []).append(code)
+    if not pairs:
+        return mesh
+    forward = (mesh.triangles < np.roll(mesh.triangles, -1, axis=1)).ravel()
+    drop = np.zeros(mesh.n_triangles, bool)
+    for (fa, fb), edges in pairs.items():
+        ends = np.unique(np.concatenate(np.divmod(np.array(edges, np.int64), n)))
+        cand = np.zeros(mesh.n_triangles, bool)
+        cand[rim] = np.isin(mesh.face_ids[rim], (fa, fb)) & np.isin(mesh.triangles[rim], ends).all(axis=1)
+        cand &= ~drop
+        touched = np.unique(codes[np.repeat(cand, 3)])
+        kept = np.isin(codes, touched) & np.repeat(~(drop | cand), 3)  # the sides left on those edges
+        k = np.searchsorted(touched, codes[kept])
+        left = np.bincount(k, minlength=len(touched))
+        ahead = np.bincount(k, weights=forward[kept], minlength=len(touched))
+        if cand.any() and ((left == 0) | ((left == 2) & (ahead == 1))).all():  # closed and oriented
+            drop |= cand
+    if not drop.any():
+        return mesh
+    keep = ~drop
+    tris = mesh.triangles[keep]
+    used = np.flatnonzero(np.bincount(tris.ravel(), minlength=mesh.n_vertices))
+    remap = np.full(mesh.n_vertices, -1, np.int64)
+    remap[used] = np.arange(len(used))
+    pick = (lambda a: None if a is None else a[used])  # noqa: E731
+    return mesh.with_arrays(vertices=mesh.vertices[used], triangles=remap[tris], face_ids=mesh.face_ids[keep],
+                            uv=None if mesh.uv is None else mesh.uv[keep], vertex_dim=pick(mesh.vertex_dim),
+                            vertex_entity=pick(mesh.vertex_entity), vertex_param=pick(mesh.vertex_param))
