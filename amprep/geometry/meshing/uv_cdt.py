@@ -182,14 +182,42 @@ def insertion_points(pts: np.ndarray, bad: np.ndarray, seg_code: np.ndarray, bas
     return unique_points(np.where((length[rows, k] > 0)[:, None], mid, centroid))
 
 
+#: point-segment pairs tested at once by inside_loops (memory: ~40 bytes each)
+PAIRS_PER_BLOCK = 2_000_000
+
+
 def inside_loops(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
-    """(N,) bool even-odd point-in-polygon over all loops (closed polygons (n, 2))."""
+    """(N,) bool even-odd point-in-polygon over all loops (closed polygons (n, 2)): a point is inside when a ray to +x
+    crosses the segments an odd number of times, a segment counting where min(y_a, y_b) ≤ y < max(y_a, y_b) and
+    x < its x at y. Only the pairs whose y ranges meet are formed (points sorted by y, each segment's run of them
+    found by bisection), in blocks of PAIRS_PER_BLOCK: O(N log N + pairs), not N × segments."""
     inside = np.zeros(len(points), bool)
-    x, y = points[:, 0:1], points[:, 1:2]
-    for poly in loops:
-        a, b = poly, np.roll(poly, -1, axis=0)
-        cond = (a[None, :, 1] > y) != (b[None, :, 1] > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xint = a[None, :, 0] + (y - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
-        inside ^= (cond & (x < xint)).sum(axis=1) % 2 == 1
-    return inside
+    if not len(points) or not loops:
+        return inside
+    a = np.concatenate(loops)
+    b = np.concatenate([np.roll(poly, -1, axis=0) for poly in loops])
+    order = np.argsort(points[:, 1], kind="stable")
+    ys = points[order, 1]
+    lo = np.searchsorted(ys, np.minimum(a[:, 1], b[:, 1]), side="left")
+    hi = np.searchsorted(ys, np.maximum(a[:, 1], b[:, 1]), side="left")
+    span = hi - lo
+    keep = np.flatnonzero(span > 0)
+    if not len(keep):
+        return inside
+    ends = np.cumsum(span[keep])
+    crossings = np.zeros(len(points), np.int64)
+    start = 0
+    while start < len(keep):  # blocks of whole segments, each ~PAIRS_PER_BLOCK pairs (at least one segment)
+        before = ends[start - 1] if start else 0
+        stop = max(int(np.searchsorted(ends, before + PAIRS_PER_BLOCK, side="right")), start + 1)
+        seg = keep[start:stop]
+        count = span[seg]
+        which = np.repeat(seg, count)
+        first = np.repeat(np.cumsum(count) - count, count)
+        p = order[lo[which] + np.arange(len(which)) - first]
+        x, y = points[p, 0], points[p, 1]
+        ax, ay, bx, by = a[which, 0], a[which, 1], b[which, 0], b[which, 1]
+        xint = ax + (y - ay) * (bx - ax) / (by - ay)
+        crossings += np.bincount(p[x < xint], minlength=len(points))
+        start = stop
+    return crossings % 2 == 1
