@@ -502,3 +502,44 @@ def test_two_faces_closer_than_the_tolerance_are_pinched_not_left_non_manifold(m
 
     monkeypatch.setattr(pipeline, "pinch_double_sheets", lambda mesh: mesh)
     assert check_mesh(mesh_model(model, MeshParams(tolerance=0.1, mesher="quality")).mesh).nonmanifold_edges > 0
+
+
+def _stepped_block(step: float = 0.001):  # type: ignore[no-untyped-def]
+    """A 10 × 10 × 1 mm block whose top has a riser `step` mm high across it, 10 mm long (KiCad's pin sockets have
+    such 1 µm steps)."""
+    import cadquery as cq
+
+    pts = [(0, 0), (10, 0), (10, 1 + step), (5, 1 + step), (5, 1), (0, 1)]
+    return cq.Workplane("XZ").polyline(pts).close().extrude(-10).val().wrapped
+
+
+@pytest.mark.parametrize("tol", [0.01, 0.1])
+def test_a_face_narrower_than_the_tolerance_is_cut_at_the_tolerance_not_its_width(monkeypatch, tol):
+    """The 1 µm riser's 10 mm edges are cut to about GRADE × the tolerance at 0.01 mm (the riser holds needles whatever
+    its segments), not to 3 µm floored at the tolerance, which filled both top faces with triangles graded from 1,000
+    segments; at 0.1 mm NEEDLE × 1 µm is under the tolerance and the mesh is as before. No more needles in the
+    paper's first bin either way."""
+    from amprep.geometry.core.mesh import ON_BREP_EDGE
+    from amprep.geometry.measure.regularity import regularity
+    from amprep.geometry.meshing import shared_edges
+
+    def riser_segments(mesh) -> int:  # type: ignore[no-untyped-def]
+        v = mesh.vertices
+        on = (mesh.vertex_dim == ON_BREP_EDGE) & (np.abs(v[:, 0] - 5) < 1e-9) & (np.abs(v[:, 2] - 1) < 1e-9)
+        return int(on.sum()) + 1  # the nodes inside the riser's lower edge, plus one
+
+    def first_bin(mesh) -> int:  # type: ignore[no-untyped-def]
+        return int((regularity(mesh.corners)["angle"] < 0.005).sum())
+
+    model = model_from_shape(_stepped_block())
+    r = mesh_model(model, MeshParams(tolerance=tol, mesher="quality"))
+    assert check_mesh(r.mesh).closed and float(r.face_error.max()) <= tol
+    monkeypatch.setattr(shared_edges, "NEEDLE", shared_edges.GRADE)  # the cap of the faces' widths alone, as before
+    before = mesh_model(model, MeshParams(tolerance=tol, mesher="quality"))
+    assert first_bin(r.mesh) <= first_bin(before.mesh)
+    if tol == 0.01:
+        assert riser_segments(r.mesh) <= 10 / (shared_edges.GRADE * tol) * 1.2
+        assert riser_segments(before.mesh) > 2.5 * riser_segments(r.mesh)
+        assert before.mesh.n_triangles > 2.5 * r.mesh.n_triangles
+    else:
+        assert before.mesh.n_triangles == r.mesh.n_triangles

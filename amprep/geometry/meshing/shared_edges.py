@@ -135,6 +135,11 @@ ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
 GROWTH = 1.0
 #: and is cut into at most this many parts (a sliver face's width can be near zero)
 MAX_PARTS = 64
+#: a face narrower than the chord tolerance holds needles whatever its segments: they are cut to GRADE × the tolerance,
+#: not to GRADE × its width (1 µm steps of KiCad's pin sockets had every edge near them, and the planes beside them,
+#: cut at the tolerance), but no longer than this × its width (a needle's smallest angle then ≥ 1.2°: out of the
+#: paper's first bin, under 0.3°)
+NEEDLE = 95.0
 #: a face narrower (face_width) than this × the chord tolerance has no width: its edges are not cut
 SLIVER = 1e-3
 #: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
@@ -222,8 +227,9 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
             if (kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei])
                     and (pole or _curved_in_uv(edge, face, topo.edge_params[ei]))):
                 straight.add(ei)
-            if ei in topo.edge_params and (ei not in cap or GRADE * w < cap[ei][0]):
-                cap[ei] = (GRADE * w, edge)
+            limit = GRADE * w if w >= floor else min(GRADE * floor, NEEDLE * w)
+            if ei in topo.edge_params and (ei not in cap or limit < cap[ei][0]):
+                cap[ei] = (limit, edge)
     for _ in range(2):
         points = {ei: _edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
                   if len(topo.edge_params[ei]) >= 2}
