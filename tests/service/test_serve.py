@@ -106,3 +106,29 @@ def test_serve_refuses_a_public_address_without_api_keys(tmp_path):
                        env=env, capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "AMPREP_API_KEYS" in r.stderr and "[invalid_parameter]" in r.stderr
     assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost") and not is_loopback("0.0.0.0")
+
+
+def test_the_private_redis_never_takes_the_api_port(monkeypatch):
+    """The OS may hand the port the API was told to use (chosen free, not bound yet) to the private Redis too: uvicorn
+    then failed to bind for good (seen once in the suite). Forced: the OS offers that port twice, then another."""
+    import socket
+
+    from amprep import serve
+
+    offered = iter([41001, 41001, 41002])
+
+    class Socket:
+        def __enter__(self):  # type: ignore[no-untyped-def]
+            return self
+
+        def __exit__(self, *exc):  # type: ignore[no-untyped-def]
+            return False
+
+        def bind(self, address):  # type: ignore[no-untyped-def]
+            self.port = next(offered)
+
+        def getsockname(self):  # type: ignore[no-untyped-def]
+            return ("127.0.0.1", self.port)
+
+    monkeypatch.setattr(socket, "socket", Socket)
+    assert serve.free_port(avoid=(41001,)) == 41002
