@@ -147,9 +147,10 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, compl
         open_for_us = [(k, c) for k, c in both if not c[tool]["closed"]]
         if open_for_us:
             lines += ["", f"Open from `{tool}` (`amprep convert` says why in its notes: surfaces that stay open once "
-                      "sewn, or faces it could not mesh):", ""]
-            lines += [f"- {k[0]} at {k[1]:g} mm: {c[tool]['boundary']} boundary edges "
-                      f"(OCCT: {c[REFERENCE]['boundary']} boundary, {c[REFERENCE]['nonmanifold']} non-manifold)"
+                      "sewn, or faces it could not mesh; non-manifold edges where solids of an assembly touch, or "
+                      "where the B-rep's own edge bounds more than two faces):", ""]
+            lines += [f"- {k[0]} at {k[1]:g} mm: {c[tool]['boundary']} boundary, {c[tool]['nonmanifold']} non-manifold "
+                      f"edges (OCCT: {c[REFERENCE]['boundary']} boundary, {c[REFERENCE]['nonmanifold']} non-manifold)"
                       for k, c in open_for_us]
     lines += ["", "| part | tol mm | tool | s | triangles | closed | boundary | non-manifold | degenerate | "
               "max dev / tol | angle |", "|" + "---|" * 11]
