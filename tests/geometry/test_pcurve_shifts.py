@@ -23,22 +23,30 @@ from tests.conftest import corpus
 from tests.geometry.test_independent_distance import _worst_distance
 
 
-def _shifted_cylinder(path) -> None:  # type: ignore[no-untyped-def]
+def _cylinder_with_moved_pcurves(seam, top: gp_Vec2d):  # type: ignore[no-untyped-def]
+    """A cylinder r 5, h 10 and its side face, whose seam's two pcurves c1, c2 (edge range starting at a) are replaced
+    by seam(c1, c2, a) and whose top circle's pcurve is moved by `top`."""
     import cadquery as cq
 
     solid = cq.Solid.makeCylinder(5, 10).wrapped
     face = next(f for f in explore(solid, TopAbs_FACE, TopoDS.Face_s) if BRep_Tool.Surface_s(f).IsUPeriodic())
-    shift, builder = gp_Vec2d(-2 * np.pi, 0), BRep_Builder()
+    builder = BRep_Builder()
     for e in face_edges(face):
         a, b = BRep_Tool.Range_s(e)
         if BRep_Tool.IsClosed_s(e, face):
             if e.Orientation() == TopAbs_FORWARD:
                 c1 = BRep_Tool.CurveOnSurface_s(e, face, a, b)
                 c2 = BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(e.Reversed()), face, a, b)
-                builder.UpdateEdge(e, c1, c2.Translated(shift), face, BRep_Tool.Tolerance_s(e))
+                builder.UpdateEdge(e, *seam(c1, c2, a), face, BRep_Tool.Tolerance_s(e))
         elif abs(BRep_Tool.CurveOnSurface_s(e, face, a, b).Value(a).Y() - 10) < 1e-9:  # the top circle
-            builder.UpdateEdge(e, BRep_Tool.CurveOnSurface_s(e, face, a, b).Translated(shift), face,
+            builder.UpdateEdge(e, BRep_Tool.CurveOnSurface_s(e, face, a, b).Translated(top), face,
                                BRep_Tool.Tolerance_s(e))
+    return solid, face
+
+
+def _shifted_cylinder(path) -> None:  # type: ignore[no-untyped-def]
+    shift = gp_Vec2d(-2 * np.pi, 0)
+    solid, _ = _cylinder_with_moved_pcurves(lambda c1, c2, a: (c1, c2.Translated(shift)), shift)
     BRepTools.Write_s(solid, str(path))
 
 
@@ -127,28 +135,19 @@ def _cylinder_closed_by_false_degenerates(path) -> None:  # type: ignore[no-unty
     """The cylinder's lateral face spanning 2 periods in (u,v), its loop closed as STEP healing closed KiCad's
     transformer's: the seam's up pcurve and the top circle's moved a period on, two edges flagged degenerated (each at
     a seam vertex, each one period along a circle) joining them."""
-    import cadquery as cq
     from OCP.Geom2d import Geom2d_Line
     from OCP.gp import gp_Dir2d, gp_Pnt2d
     from OCP.TopAbs import TopAbs_REVERSED, TopAbs_WIRE
     from OCP.TopExp import TopExp
     from OCP.TopoDS import TopoDS_Edge
 
-    solid = cq.Solid.makeCylinder(5, 10).wrapped
-    face = next(f for f in explore(solid, TopAbs_FACE, TopoDS.Face_s) if BRep_Tool.Surface_s(f).IsUPeriodic())
     builder, period = BRep_Builder(), 2 * np.pi
     shift = gp_Vec2d(period, 0)
-    for e in face_edges(face):
-        a, b = BRep_Tool.Range_s(e)
-        if BRep_Tool.IsClosed_s(e, face):
-            if e.Orientation() == TopAbs_FORWARD:
-                c1 = BRep_Tool.CurveOnSurface_s(e, face, a, b)
-                c2 = BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(e.Reversed()), face, a, b)
-                c1, c2 = (c1.Translated(shift), c2) if c1.Value(a).X() > 1 else (c1, c2.Translated(shift))
-                builder.UpdateEdge(e, c1, c2, face, BRep_Tool.Tolerance_s(e))
-        elif abs(BRep_Tool.CurveOnSurface_s(e, face, a, b).Value(a).Y() - 10) < 1e-9:  # the top circle
-            builder.UpdateEdge(e, BRep_Tool.CurveOnSurface_s(e, face, a, b).Translated(shift), face,
-                               BRep_Tool.Tolerance_s(e))
+
+    def up_a_period(c1, c2, a):  # type: ignore[no-untyped-def]  # the seam's pcurve at u = 2π moves to 4π
+        return (c1.Translated(shift), c2) if c1.Value(a).X() > 1 else (c1, c2.Translated(shift))
+
+    solid, face = _cylinder_with_moved_pcurves(up_a_period, shift)
     seam = next(e for e in face_edges(face) if BRep_Tool.IsClosed_s(e, face))
     wire = explore(face, TopAbs_WIRE, TopoDS.Wire_s)[0]
     wire.Free(True)
