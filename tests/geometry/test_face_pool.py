@@ -80,3 +80,21 @@ def test_every_process_takes_work_and_errors_come_back():
     with pytest.raises(AmprepError) as exc:
         face_pool.map_faces(fail, range(30), parallel_min=0, workers=2)
     assert exc.value.code == ErrorCode.EMPTY_MODEL
+
+
+@pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
+def test_a_shared_count_adds_up_across_the_forked_processes():
+    """Every process's adds land in one total (the triangle limit is kept by it while faces are meshed in parallel):
+    the largest total any process saw is the sum of all, and each total seen is distinct."""
+    from amprep.geometry.parallel.face_pool import SharedCount
+
+    count = SharedCount(5)
+
+    def add(i: int) -> tuple[int, int]:
+        time.sleep(0.05)  # long enough for the forked child to take its share
+        return os.getpid(), count.add(i + 1)
+
+    seen = face_pool.map_faces(add, list(range(40)), parallel_min=0, workers=2)
+    totals = sorted(t for _, t in seen.values())
+    assert len({pid for pid, _ in seen.values()}) == 2
+    assert totals[-1] == 5 + sum(range(1, 41)) and len(set(totals)) == 40

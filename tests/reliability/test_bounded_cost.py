@@ -151,3 +151,33 @@ def test_a_cancel_seen_while_a_face_is_meshed_stops_the_meshing(reference_solids
     with checking(cancel), pytest.raises(AmprepError) as e:
         mesh_model(model, MeshParams(tolerance=0.01, mesher=mesher, force_fallback=True, parallel=False))
     assert e.value.code == ErrorCode.CANCELLED and started
+
+
+def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_was_low(monkeypatch):
+    """An estimate far under the truth (forced: the B-rep estimated at one triangle) lets a part past the check before
+    meshing; the limit is then kept face by face, so meshing stops with output_too_large once the faces made exceed it,
+    not after every face is meshed (the quality mesher on OCCT's hammer ran 90 s before refusing)."""
+    import cadquery as cq
+
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.meshing import enforce, prepare
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
+
+    plate = cq.Workplane("XY").box(40, 40, 2).faces(">Z").workplane().rarray(6, 6, 5, 5).rect(2, 2).cutThruAll()
+    model = model_from_shape(plate.val().wrapped)
+    params = MeshParams(tolerance=0.01, mesher="quality", parallel=False)
+    whole = mesh_model(model, params).mesh.n_triangles
+    calls = []
+    real = enforce.mesh_face
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(enforce, "mesh_face", counted)
+    monkeypatch.setattr(prepare, "estimate_triangles", lambda *a, **k: 1)
+    with pytest.raises(AmprepError) as e:
+        mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", parallel=False, max_triangles=whole // 3))
+    assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE
+    assert 0 < len(calls) < len(model.faces)

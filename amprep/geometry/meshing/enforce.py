@@ -33,7 +33,7 @@ from amprep.geometry.meshing.shared_edges import (
     split_edge_to_tolerance,
 )
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING
-from amprep.geometry.parallel.face_pool import map_faces
+from amprep.geometry.parallel.face_pool import SharedCount, map_faces
 
 ENFORCE_ROUNDS = 4
 #: faces are refined until their sampled error is ≤ this × tolerance: the order-6 grid can miss up to ~0.5 %
@@ -123,7 +123,19 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
                                 target, f.params.angular, f.params.max_triangles)
         f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
 
+    limit = f.params.max_triangles
+    redone = set(remesh)
+    made = SharedCount(sum(len(p.tris) for i, p in enumerate(f.patches) if p is not None and i not in redone))
+
     def remesh_face(i: int) -> FacePatch | None:
+        patch = mesh_one(i)
+        # the estimate before meshing is an estimate: the limit is kept as the faces come, in every process at once
+        if patch is not None and made.add(len(patch.tris)) > limit:
+            raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew over the limit of {limit:,} triangles while "
+                              "it was made: use a coarser tolerance, the default mesher or a higher max_triangles")
+        return patch
+
+    def mesh_one(i: int) -> FacePatch | None:
         old = f.patches[i]
         seeds = None
         if old is not None and old.uv is not None:

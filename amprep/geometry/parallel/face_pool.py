@@ -20,6 +20,23 @@ PARALLEL_MIN_COST = 20_000
 MAX_WORKERS = 4
 
 
+class SharedCount:
+    """A running total shared by this process and the children map_faces forks after it is made (a fork-context
+    Value, or a plain int where forking is not available): add(k) adds k and returns the new total."""
+
+    def __init__(self, start: int = 0) -> None:
+        self._shared = mp.get_context("fork").Value("q", start) if fork_available() else None
+        self._local = start
+
+    def add(self, k: int) -> int:
+        if self._shared is None:
+            self._local += k
+            return self._local
+        with self._shared.get_lock():
+            self._shared.value += k
+            return int(self._shared.value)
+
+
 def can_fork() -> bool:
     """True when worker processes may be forked here: the fork start method exists, this is not a daemonic process
     (a Celery prefork child, whose parallelism is its siblings), and numba's threads (if loaded) survive a fork."""
