@@ -313,7 +313,7 @@ def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated(monkeypatch
 
     model = read_cad(corpus("featuretype_inch_ap214.step"))
     limit = estimate_triangles(model, 0.01, 0.5) * QUALITY_ESTIMATE_FACTOR + 1000  # passes the estimate
-    for lattice_min, said in ((lattice.LATTICE_MIN, "rows alone"), (np.inf, "grew to")):
+    for lattice_min, said in ((lattice.LATTICE_MIN, "rows alone"), (np.inf, "while it was made")):
         monkeypatch.setattr(lattice, "LATTICE_MIN", lattice_min)
         with pytest.raises(AmprepError) as err:
             mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=limit))
