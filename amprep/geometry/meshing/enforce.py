@@ -158,11 +158,6 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         f.patches[i] = patch
         if patch is None:
             f.unmeshed.append(i)
-    total = sum(len(p.tris) for p in f.patches if p is not None)
-    if total > f.params.max_triangles:  # the estimate before meshing is an estimate: the limit itself is kept here
-        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew to {total:,} triangles, over the limit of "
-                          f"{f.params.max_triangles:,}: use a coarser tolerance, the default mesher or a higher "
-                          "max_triangles")
 
 
 def _open_collapsed_loops(f: FaceStates, faces: set[int]) -> set[int]:

@@ -93,30 +93,25 @@ def collapse_short_edges(faces: list[TopoDS_Face], topo: Topology, shortest: flo
     (Topology.merge_vertices, as BRepMesh collapses an edge under its min size): the weld then drops the triangles
     that collapse with it, on both faces. Not an edge of a face whose perimeter is under TINY_FACE × `shortest`: a
     face that small would collapse whole (a solid under the tolerance would vanish), so it keeps its edges."""
-    length: dict[int, float] = {}
+    edges: dict[int, tuple[int, int, np.ndarray, float]] = {}  # ei: its vertices, params, discretised length
     tiny: set[int] = set()
     for face in faces:
-        perimeter, edges = 0.0, []
+        perimeter, own = 0.0, []
         for edge in face_edges(face):
             ei, v1, _, v2, _, degenerate = topo.edge_facts(edge)
             params = topo.edge_params.get(ei)
             if degenerate or params is None:
                 continue
-            if ei not in length:
-                length[ei] = edge_length(edge, params)
-            perimeter += length[ei]
-            edges.append(ei)
+            if ei not in edges:
+                edges[ei] = (v1, v2, params, edge_length(edge, params))
+            perimeter += edges[ei][3]
+            own.append(ei)
         if perimeter < TINY_FACE * shortest:
-            tiny.update(edges)
-    for face in faces:
-        for edge in face_edges(face):
-            ei, v1, _, v2, _, degenerate = topo.edge_facts(edge)
-            params = topo.edge_params.get(ei)
-            if degenerate or params is None or v1 == v2 or ei in tiny:
-                continue
-            if length[ei] < shortest:
-                topo.merge_vertices(v1, v2)
-                topo.edge_params[ei] = params[[0, -1]]
+            tiny.update(own)
+    for ei, (v1, v2, params, length) in edges.items():
+        if v1 != v2 and ei not in tiny and length < shortest:
+            topo.merge_vertices(v1, v2)
+            topo.edge_params[ei] = params[[0, -1]]
 
 
 # ---- the quality mesher's edge grading

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from amprep.geometry.core.checks import degenerate_mask
+from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume
+from amprep.geometry.core.edges import edge_codes, edge_incidence
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -123,8 +124,6 @@ def pole_folds(patch: FacePatch) -> bool:
     tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])]
     if len(tris) == 0:
         return False
-    from amprep.geometry.core.edges import edge_incidence
-
     _, tris = np.unique(tris, return_inverse=True)
     tris = tris.reshape(-1, 3)
     return bool(edge_incidence(tris).count.max() > 2 or folded_pairs(tris, np.zeros(len(tris), np.int64)).any())
@@ -133,9 +132,6 @@ def pole_folds(patch: FacePatch) -> bool:
 def orient_stored_shells(mesh: Mesh) -> Mesh:
     """Reverse every closed shell made only of stored (tessellated-only) faces whose signed volume is negative:
     with no surface to orient them, a closed shell's own volume says which side is out."""
-    from amprep.geometry.core.checks import shell_labels, signed_volume
-    from amprep.geometry.core.edges import edge_incidence
-
     stored = np.array([f.meshed_by == "stored" for f in mesh.faces], bool)
     if mesh.n_triangles == 0 or not stored.any():
         return mesh
@@ -205,8 +201,6 @@ def pinch_double_sheets(mesh: Mesh) -> Mesh:
     are searched (a strip straight across has no inner node)."""
     if mesh.n_triangles < 4 or mesh.vertex_dim is None:
         return mesh
-    from amprep.geometry.core.edges import edge_codes, edge_incidence
-
     rim = np.flatnonzero((mesh.vertex_dim != IN_FACE)[mesh.triangles].all(axis=1))
     if len(rim) < 3:
         return mesh
