@@ -216,7 +216,7 @@ def test_rows_over_the_triangle_limit_are_refused_before_they_are_made(reference
 
     import_limit = MeshParams(tolerance=0.0001, mesher="quality", max_triangles=500_000)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(prepare, "QUALITY_ESTIMATE_FACTOR", 0)  # past the B-rep estimate, to the plan's own
+        mp.setattr(prepare, "QUALITY_LEAST_FACTOR", 0)  # past the B-rep estimate, to the plan's own
         with pytest.raises(AmprepError) as err:
             mesh_model(model_from_shape(reference_solids["sphere"]), import_limit)
     assert err.value.code == ErrorCode.OUTPUT_TOO_LARGE and "rows alone" in str(err.value)

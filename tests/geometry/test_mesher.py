@@ -304,15 +304,15 @@ def test_graded_edges_stay_shared_by_both_faces(reference_solids):
 
 
 def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated(monkeypatch):
-    """The quality mesher can outgrow the estimate made before meshing: the limit is checked on its planned rows
-    before they are made, and on the mesh as it is made (with no lattice planned)."""
+    """The quality mesher can outgrow its estimates (forced here: its faces estimated at none): the limit is checked
+    on its planned rows before they are made, and on the mesh as it is made (with no lattice planned)."""
     from amprep.errors import AmprepError, ErrorCode
     from amprep.geometry.cad.estimate import estimate_triangles
-    from amprep.geometry.meshing import lattice
-    from amprep.geometry.meshing.prepare import QUALITY_ESTIMATE_FACTOR
+    from amprep.geometry.meshing import enforce, lattice
 
     model = read_cad(corpus("featuretype_inch_ap214.step"))
-    limit = estimate_triangles(model, 0.01, 0.5) * QUALITY_ESTIMATE_FACTOR + 1000  # passes the estimate
+    limit = estimate_triangles(model, 0.01, 0.5) * 6 + 1000  # under the mesh's 55k, over its B-rep estimate's floor
+    monkeypatch.setattr(enforce, "quality_estimate", lambda surfaces, *a, **k: np.zeros(len(surfaces)))
     for lattice_min, said in ((lattice.LATTICE_MIN, "rows alone"), (np.inf, "while it was made")):
         monkeypatch.setattr(lattice, "LATTICE_MIN", lattice_min)
         with pytest.raises(AmprepError) as err:
@@ -543,3 +543,12 @@ def test_a_face_narrower_than_the_tolerance_is_cut_at_the_tolerance_not_its_widt
         assert before.mesh.n_triangles > 2.5 * r.mesh.n_triangles
     else:
         assert before.mesh.n_triangles == r.mesh.n_triangles
+
+
+def test_the_quality_mesher_keeps_the_triangles_a_tessellated_only_face_stores():
+    """NIST's FTC-08 in AP242 stores triangles and no surfaces: there is nothing for the quality mesher to mesh, and
+    its faces keep their own triangles, as with the default mesher (it used to give no triangles: empty_model)."""
+    model = read_cad(corpus("nist_ftc08_tessellated_ap242.stp"))
+    quality, default = (mesh_model(model, MeshParams(tolerance=0.1, mesher=m)).mesh for m in ("quality", "occt"))
+    assert quality.n_triangles == default.n_triangles > 3000
+    assert np.array_equal(np.sort(quality.corners.reshape(-1, 3), axis=0), np.sort(default.corners.reshape(-1, 3), axis=0))

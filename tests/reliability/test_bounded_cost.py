@@ -154,9 +154,10 @@ def test_a_cancel_seen_while_a_face_is_meshed_stops_the_meshing(reference_solids
 
 
 def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_was_low(monkeypatch):
-    """An estimate far under the truth (forced: the B-rep estimated at one triangle) lets a part past the check before
-    meshing; the limit is then kept face by face, so meshing stops with output_too_large once the faces made exceed it,
-    not after every face is meshed (the quality mesher on OCCT's hammer ran 90 s before refusing)."""
+    """Estimates far under the truth (forced: the B-rep estimated at one triangle, the quality mesher's faces at none)
+    let a part past the checks before meshing; the limit is then kept face by face, so meshing stops with
+    output_too_large once the faces made exceed it, not after every face is meshed (the quality mesher on OCCT's
+    hammer ran 90 s before refusing)."""
     import cadquery as cq
 
     from amprep.geometry.cad.read import model_from_shape
@@ -177,6 +178,7 @@ def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_wa
 
     monkeypatch.setattr(enforce, "mesh_face", counted)
     monkeypatch.setattr(prepare, "estimate_triangles", lambda *a, **k: 1)
+    monkeypatch.setattr(enforce, "quality_estimate", lambda surfaces, *a, **k: np.zeros(len(surfaces)))
     with pytest.raises(AmprepError) as e:
         mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", parallel=False, max_triangles=whole // 3))
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE

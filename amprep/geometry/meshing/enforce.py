@@ -24,6 +24,7 @@ from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_trian
 from amprep.geometry.meshing.occt_check import patch_error
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.params import MeshParams
+from amprep.geometry.meshing.prepare import quality_estimate, refuse_quality_too_large
 from amprep.geometry.meshing.shared_edges import (
     collapse_short_edges,
     discretize_missing_edges,
@@ -75,9 +76,13 @@ class FaceStates:
     errors: list[np.ndarray] = field(init=False)
     unmeshed: list[int] = field(default_factory=list)
     lattice: dict[int, Field] = field(default_factory=dict)  # faces whose rows lattice.plan_lattices set
+    uses: np.ndarray = field(default=None)  # type: ignore[assignment]  # (F,) faces of the model each stands for
+    estimated: int = 0  # the quality mesher's estimate, once made (_estimate)
 
     def __post_init__(self) -> None:
         self.errors = [np.zeros(0)] * len(self.patches)
+        if self.uses is None:
+            self.uses = np.ones(len(self.patches), np.int64)
 
 
 def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progress: ProgressFn | None) -> None:
@@ -118,19 +123,22 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         faces = [f.model.faces[i] for i in remesh]
         collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
         grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
-        planned = plan_lattices(faces, [f.surfaces[i] for i in remesh],  # type: ignore[misc]
-                                [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces], f.topo,
+        loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
+        planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
                                 target, f.params.angular, f.params.max_triangles)
         f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
+        if not f.estimated:
+            _estimate(f, remesh, loops, planned)
 
     limit = f.params.max_triangles
     redone = set(remesh)
-    made = SharedCount(sum(len(p.tris) for i, p in enumerate(f.patches) if p is not None and i not in redone))
+    made = SharedCount(sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches)
+                           if p is not None and i not in redone))
 
     def remesh_face(i: int) -> FacePatch | None:
         patch = mesh_one(i)
         # the estimate before meshing is an estimate: the limit is kept as the faces come, in every process at once
-        if patch is not None and made.add(len(patch.tris)) > limit:
+        if patch is not None and made.add(len(patch.tris) * int(f.uses[i])) > limit:
             raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew over the limit of {limit:,} triangles while "
                               "it was made: use a coarser tolerance, the default mesher or a higher max_triangles")
         return patch
@@ -158,6 +166,19 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         f.patches[i] = patch
         if patch is None:
             f.unmeshed.append(i)
+
+
+def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None]) -> None:  # type: ignore[type-arg]
+    """f.estimated: the quality mesher's estimate (prepare.quality_estimate) of the faces of `remesh` with their
+    boundary_loops `loops` and planned lattices, each × its uses, and the triangles other faces already have;
+    output_too_large when over the limit."""
+    segments = [sum(max(len(f.topo.edge_params.get(f.topo.edge_index(e), ())) - 1, 0) for e in face_edges(f.model.faces[i]))
+                for i in remesh]
+    rows = [p.expected if p is not None else None for p in planned]
+    expected = quality_estimate([f.surfaces[i] for i in remesh], loops, segments, rows, f.tol)  # type: ignore[misc]
+    redone = set(remesh)
+    kept = sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches) if p is not None and i not in redone)
+    f.estimated = refuse_quality_too_large(expected * f.uses[remesh], kept, f.tol, f.params.max_triangles)
 
 
 def _open_collapsed_loops(f: FaceStates, faces: set[int]) -> set[int]:

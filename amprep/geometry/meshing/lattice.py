@@ -6,7 +6,7 @@ face by its own iso-lines)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from OCP.BRep import BRep_Tool
@@ -159,6 +159,7 @@ class Field:
     dv: np.ndarray
     per_u: np.ndarray
     by_curvature: bool
+    expected: float = 0.0  # the triangles its rows make, about (expected_triangles), once plan_lattices planned it
 
     def per_u_at(self, v: np.ndarray) -> np.ndarray:
         """(k, nu) per_u at the rows v (k,), linear between the samples."""
@@ -301,7 +302,7 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
         for e, v in ((sides.edges[2], rows[0]), (sides.edges[3], rows[-1])):
             if e >= 0 and e not in fixed and not BRep_Tool.Degenerated_s(edges[e]):
                 _split_to_field(face, edges[e], topo, field, float(v))  # type: ignore[arg-type]
-        planned[k] = field
+        planned[k] = replace(field, expected=n)  # type: ignore[arg-type]
     topo._lattice_edges = fixed  # type: ignore[attr-defined]
     return planned
 

@@ -26,7 +26,7 @@ from amprep.geometry.meshing.enforce import FaceStates, enforce_tolerance
 from amprep.geometry.meshing.occt_check import first_look
 from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arrays
 from amprep.geometry.meshing.params import MeshParams
-from amprep.geometry.meshing.prepare import Prepared, bbox_diagonal, prepare
+from amprep.geometry.meshing.prepare import Prepared, bbox_diagonal, face_uses, prepare
 from amprep.geometry.meshing.read_ahead import read_and_prepare_ahead
 from amprep.geometry.meshing.weld import orient_stored_shells, pinch_double_sheets, split_caps, weld
 
@@ -35,7 +35,8 @@ from amprep.geometry.meshing.weld import orient_stored_shells, pinch_double_shee
 class MeshResult:
     """The welded mesh and how it was made: `face_error` (F,) max chordal error per face (nan: no surface),
     `tolerance` the absolute tolerance used, `fallback_faces` ids meshed by our own mesher, and why,
-    `estimated_triangles` the count expected from the B-rep before meshing (estimate.py)."""
+    `estimated_triangles` the count expected before meshing (estimate.py's from the B-rep; the quality mesher's
+    from its edges and the faces' curvature, prepare.quality_estimate)."""
 
     mesh: Mesh
     tolerance: float
@@ -76,7 +77,7 @@ def mesh_prepared(prepared: Prepared, params: MeshParams, progress: ProgressFn |
     inst = prepared.instancing
     if inst is None:
         return _mesh_whole(prepared, params, progress)
-    part = _mesh_whole(replace(prepared, model=inst.template, instancing=None), params, progress)
+    part = _mesh_whole(replace(prepared, model=inst.template, instancing=None), params, progress, face_uses(inst))
     return _placed(part, inst, prepared.model)
 
 
@@ -92,16 +93,17 @@ def _placed(part: MeshResult, inst: Instancing, model: CadModel) -> MeshResult:
                       part.estimated_triangles)
 
 
-def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | None) -> MeshResult:
+def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | None,
+                uses: np.ndarray | None = None) -> MeshResult:
     prog = Progress(progress)
     prog("meshing", 0.4)
     model, tol = prepared.model, prepared.tolerance
     topo = Topology.of(model.shape)
     n_faces = len(model.faces)
     min_area = DEGENERATE_REL_AREA * bbox_diagonal(model, meshed=True) ** 2  # as checks.degenerate_mask has it
-    bulk = bulk_triangulation_arrays(model.faces) if not params.all_own else [None] * n_faces
     surfaces: list[Surface | None] = [surface_of(f) if BRep_Tool.Surface_s(f) is not None else None
                                       for f in model.faces]  # none: a tessellated-only face (stored triangles)
+    bulk = bulk_triangulation_arrays(model.faces) if not params.all_own else _stored(model, surfaces)
     use = (_compiled_for(bulk, surfaces, params.check_order, prepared.estimated) if not params.all_own
            else worth_compiling(prepared.estimated, params.check_order))  # no first mesh: the part's estimate decides
     if use:
@@ -109,7 +111,8 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
     with compiled(use):  # one evaluator for the whole part, whatever is loaded (core/compiled.py)
         prog("meshing", 0.45)
         skip = ({i: "large_curved" for i in prepared.own} if not params.all_own
-                else dict.fromkeys(range(n_faces), "quality" if params.quality else "forced"))
+                else dict.fromkeys((i for i in range(n_faces) if surfaces[i] is not None),
+                                   "quality" if params.quality else "forced"))
         looks = first_look(model.faces, topo, bulk, surfaces, skip, params.check_order, min_area)
         patches: list[FacePatch | None] = []
         fallback: dict[int, str] = {}
@@ -122,7 +125,7 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
             elif look.error is not None:
                 first_error[i] = look.error
         prog("meshing", 0.5)
-        faces = FaceStates(model, topo, surfaces, params, tol, min_area, patches, fallback)
+        faces = FaceStates(model, topo, surfaces, params, tol, min_area, patches, fallback, uses=uses)
         enforce_tolerance(faces, first_error, progress)
     infos = tuple(
         FaceInfo(i, surfaces[i].surface_type if surfaces[i] is not None else "none", model.face_solid[i],
@@ -134,7 +137,18 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
                                                                     topo.vertex_roots()))))
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
-    return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))), prepared.estimated)
+    return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))),
+                      faces.estimated or prepared.estimated)
+
+
+def _stored(model: CadModel, surfaces: list[Surface | None]) -> list:  # type: ignore[type-arg]
+    """bulk_triangulation_arrays of the faces with no surface (a tessellated-only face keeps the triangles it stores,
+    whichever mesher runs), None for every other face."""
+    stored = [i for i, s in enumerate(surfaces) if s is None]
+    bulk: list = [None] * len(surfaces)  # type: ignore[type-arg]
+    for i, arrays in zip(stored, bulk_triangulation_arrays([model.faces[i] for i in stored]), strict=True):
+        bulk[i] = arrays
+    return bulk
 
 
 def _compiled_for(bulk: list, surfaces: list[Surface | None], order: int, estimated: int) -> bool:  # type: ignore[type-arg]

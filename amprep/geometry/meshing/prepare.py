@@ -17,10 +17,13 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.estimate import estimate_triangles
 from amprep.geometry.cad.instances import Instancing, find_instancing, template_face_of
 from amprep.geometry.cad.read import CadModel
+from amprep.geometry.cad.surfaces import Surface, tangents
 from amprep.geometry.core.limits import MIN_TOLERANCE
 from amprep.geometry.meshing.brepmesh import run_brepmesh
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.shared_edges import has_pole
+from amprep.geometry.meshing.uv_cdt import inside_loops
+from amprep.geometry.meshing.uv_seed import DIFF_STEP, second_form
 
 
 def bbox_diagonal(model: CadModel, meshed: bool = False) -> float:
@@ -106,26 +109,103 @@ def faces_to_mesh_ourselves(faces: tuple[TopoDS_Face, ...] | list[TopoDS_Face], 
             if (n := expected_triangles(f, tolerance)) > 0 and n >= OWN_MESH_MIN and not has_pole(f)]
 
 
-#: the quality mesher's triangles over the default's, at most, on the corpus at 0.34 mm (docs/regularity_table2.md;
-#: the ratio falls at finer tolerances, where curvature rather than shape sets the size): its estimate is this × the
-#: B-rep estimate, so a cost is refused before it is paid whichever mesher runs
+#: the quality mesher's triangles over the B-rep estimate (estimate.py), the fewest seen on the corpus: 0.39 (the hull at
+#: 0.01 mm, whose B-rep estimate takes its largest curvature everywhere); the most: 27. Before its edges exist a model
+#: is refused only when even this × the B-rep estimate is over the limit; quality_estimate decides once they do
+QUALITY_LEAST_FACTOR = 0.25
+#: the quality mesher's triangles over the B-rep estimate, typically (the corpus: 4–8 at 0.34 mm): its first estimate,
+#: which decides whether the compiled kernels are loaded before any face is meshed
 QUALITY_ESTIMATE_FACTOR = 6
 
 
 def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Instancing | None = None) -> int:
     """The model's estimated triangle count (estimate.py; with `inst`, its template's faces counted once per
-    placement); output_too_large, before any meshing, when it exceeds params.max_triangles."""
+    placement; × QUALITY_ESTIMATE_FACTOR for the quality mesher); output_too_large, before any meshing, when it
+    exceeds params.max_triangles (for the quality mesher: when QUALITY_LEAST_FACTOR × the B-rep estimate does)."""
     if inst is None:
         n = estimate_triangles(model, tol, params.angular)
     else:
-        uses = np.bincount(template_face_of(inst), minlength=len(inst.template.faces))
-        n = estimate_triangles(inst.template, tol, params.angular, uses)
-    if params.quality:  # near-equilateral triangles fill what BRepMesh leaves as fans and strips
-        n *= QUALITY_ESTIMATE_FACTOR
-    if n > params.max_triangles:
-        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm this model would mesh to about {n:,} triangles, "
-                          f"over the limit of {params.max_triangles:,}: use a coarser tolerance or a higher "
-                          "max_triangles (the estimate is made from the B-rep before meshing)")
+        n = estimate_triangles(inst.template, tol, params.angular, face_uses(inst))
+    least = n * QUALITY_LEAST_FACTOR if params.quality else n
+    if least > params.max_triangles:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm this model would mesh to about {least:,.0f} "
+                          f"triangles{' at least' if params.quality else ''}, over the limit of "
+                          f"{params.max_triangles:,}: use a coarser tolerance or a higher max_triangles (the estimate "
+                          "is made from the B-rep before meshing)")
+    return n * QUALITY_ESTIMATE_FACTOR if params.quality else n
+
+
+def face_uses(inst: Instancing) -> np.ndarray:
+    """(F,) how many faces of the model each face of the instancing's template stands for."""
+    return np.bincount(template_face_of(inst), minlength=len(inst.template.faces))
+
+
+# ---- the quality mesher's estimate, once its edges are discretised and its lattices planned (enforce._remesh): per
+# face, a planned lattice's rows (lattice.expected_triangles, within 0.75–1.34 of the count on the corpus); a plane's
+# graded Delaunay triangles, about boundary_layer(n) of its n boundary segments; any other face its boundary layer
+# plus near-equilateral triangles sized by curvature over its trimmed area (curvature_fill). On the corpus at 0.34,
+# 0.1 and 0.01 mm a part's count is 0.43–1.7 × this estimate (its B-rep estimate × 6: 0.07–4.5).
+
+#: boundary-layer triangles per boundary segment of a face with n of them: 1 + n / BOUNDARY_GROWTH, at most
+#: BOUNDARY_MOST (planes on the corpus: 0.9–6.4 per segment, the larger faces the more, as Delaunay grades inward)
+BOUNDARY_GROWTH = 20.0
+BOUNDARY_MOST = 6.0
+#: cell centres per (u,v) direction at which a curved face's curvature and trimmed area are sampled
+FILL_SAMPLES = 12
+
+
+def boundary_layer(n: np.ndarray | float) -> np.ndarray | float:
+    """Triangles along n boundary segments: n · min(BOUNDARY_MOST, 1 + n / BOUNDARY_GROWTH)."""
+    return n * np.minimum(BOUNDARY_MOST, 1 + n / BOUNDARY_GROWTH)
+
+
+def curvature_fill(surface: Surface, loops: list[np.ndarray], tol: float) -> float:
+    """Σ over the FILL_SAMPLES² cells of the loops' (u,v) box (closed polygons (n, 2)) whose centres are inside them:
+    the cell's area |S_u × S_v| du dv × 2κ / (3√3 t), the density of equilateral triangles of side s whose sagitta
+    at the centroid κs²/6 is the tolerance t, κ the larger principal curvature there (at most 6 / t: s ≥ t)."""
+    pts = np.concatenate(loops)
+    lo, span = pts.min(axis=0), np.maximum(np.ptp(pts, axis=0), 1e-12)
+    g = (np.arange(FILL_SAMPLES) + 0.5) / FILL_SAMPLES
+    uv = np.stack(np.meshgrid(lo[0] + g * span[0], lo[1] + g * span[1]), -1).reshape(-1, 2)
+    uv = uv[inside_loops(uv, loops)]
+    if not len(uv):
+        return 0.0
+    su, sv = tangents(surface, uv)
+    ll, mm, nn = second_form(surface, uv, DIFF_STEP * span)
+    e, f, g2 = (su * su).sum(axis=1), (su * sv).sum(axis=1), (sv * sv).sum(axis=1)
+    w2 = np.maximum(e * g2 - f * f, 1e-300)
+    gauss, mean = (ll * nn - mm * mm) / w2, (e * nn - 2 * f * mm + g2 * ll) / (2 * w2)
+    kappa = np.abs(mean) + np.sqrt(np.maximum(mean * mean - gauss, 0.0))
+    area = np.sqrt(w2) * span[0] * span[1] / FILL_SAMPLES**2
+    fill = float(np.sum(area * np.minimum(np.nan_to_num(kappa), 6 / tol)) * 2 / (3 * np.sqrt(3) * tol))
+    return fill if np.isfinite(fill) else 0.0
+
+
+def quality_estimate(surfaces: list[Surface], loops: list[list[dict]], segments: list[int],  # type: ignore[type-arg]
+                     lattice: list[float | None], tol: float) -> np.ndarray:
+    """(F,) the triangles the quality mesher is expected to make on each face (above): `loops` its boundary_loops
+    (none where they do not join: only its boundary layer), `segments` its boundary segments, `lattice` its planned
+    lattice's count (None where it has none)."""
+    out = np.zeros(len(surfaces))
+    for i, (surface, lps, n, rows) in enumerate(zip(surfaces, loops, segments, lattice, strict=True)):
+        if rows is not None:
+            out[i] = rows
+            continue
+        out[i] = boundary_layer(float(n))
+        if lps and not surface.affine:
+            out[i] += curvature_fill(surface, [lp["uv"] for lp in lps], tol)
+    return out
+
+
+def refuse_quality_too_large(expected: np.ndarray, made: int, tol: float, limit: int) -> int:
+    """Σ expected (F,) + `made` (triangles already made, kept as they are), rounded up; output_too_large when over
+    `limit`, before any face is meshed."""
+    n = int(np.ceil(expected.sum())) + made
+    if n > limit:
+        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm the quality mesher would make about {n:,} "
+                          f"triangles, over the limit of {limit:,}: use a coarser tolerance, the default mesher or a "
+                          "higher max_triangles (the estimate is made from the edges and the faces' curvature before "
+                          "any face is meshed)")
     return n
 
 
