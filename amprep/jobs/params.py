@@ -97,8 +97,9 @@ def _meshing(tolerance: float, help_tolerance: str) -> tuple[Param, ...]:
               "and half the angle (more triangles); off: at 0.95× the tolerance where only ruled faces meet (planes, "
               "cylinders, cones, extrusions)"),
         Param("max_triangles", "int", DEFAULT_MAX_TRIANGLES, "Refuse (output_too_large) a job whose output is "
-              "predicted to have more triangles than this: for CAD, estimated from the B-rep before meshing; for "
-              "refine, the refinement's own size", ge=1, le=MAX_TRIANGLES_CAP),
+              "predicted to have more triangles than this: for CAD, estimated from the B-rep before meshing (the "
+              "quality mesher's from its edges and the faces' curvature, before any face is meshed) and kept as "
+              "the mesh is made; for refine, the refinement's own size", ge=1, le=MAX_TRIANGLES_CAP),
         Param("own_large_faces", "bool", True, "Mesh torus faces expected to need 20,000 triangles or more ourselves "
               "from curvature-sized points (faster than OCCT, fewer triangles); off leaves every face to OCCT's BRepMesh"),
     )
