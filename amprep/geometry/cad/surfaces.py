@@ -167,6 +167,15 @@ def wrap_periodic(uv: np.ndarray, uperiod: tuple[float, float] | None, vperiod: 
     return out
 
 
+def nearest_copy(uv: np.ndarray, guess: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
+    """uv shifted by whole periods to lie nearest `guess` (both (N, 2)); `periods` a Surface's (None: not periodic)."""
+    out = uv.copy()
+    for d, per in enumerate(periods):
+        if per:
+            out[:, d] += np.round((guess[:, d] - uv[:, d]) / per) * per
+    return out
+
+
 def _closed_form(kind: int, frame: tuple[np.ndarray, ...], a: float = 0.0, b: float = 0.0) -> tuple[int, np.ndarray]:
     """(kind, (14,) O X Y Z a b): the compiled kernel's description of a closed-form surface (_chordal_kernel.py)."""
     return kind, np.concatenate([*frame, [a, b]]).astype(np.float64)

@@ -10,12 +10,12 @@ import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.edge_curves import EdgeCurves
-from amprep.geometry.cad.surfaces import Surface, tangents
+from amprep.geometry.cad.surfaces import Surface, nearest_copy, tangents
 from amprep.geometry.core.edges import edge_codes, face_edge_table
 from amprep.geometry.core.mesh import IN_FACE, NO_TOPOLOGY, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
 from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.refine.face_domain import FaceDomains
-from amprep.geometry.refine.sma import Refinement, _nearest_copy
+from amprep.geometry.refine.sma import Refinement
 
 
 def _errors(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarray, faces: np.ndarray,
@@ -355,7 +355,7 @@ def _new_vertices(edge_id: np.ndarray, slot_rows: np.ndarray, slot_cols: np.ndar
     for f in np.unique(fids[slot_rows[inner_slot]]):
         sel = inner_slot & (fids[slot_rows] == f)
         r, c = slot_rows[sel], slot_cols[sel]
-        mid_uv[r, c] = _nearest_copy(canon_uv[at[sel]], own_mid[r, c], surfaces[int(f)].periods)
+        mid_uv[r, c] = nearest_copy(canon_uv[at[sel]], own_mid[r, c], surfaces[int(f)].periods)
     return at, new_xyz, new_dim, new_ent, new_par, mid_uv
 
 

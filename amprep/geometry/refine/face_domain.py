@@ -9,11 +9,11 @@ import numpy as np
 
 from amprep.errors import AmprepError
 from amprep.geometry.cad.read import CadModel
+from amprep.geometry.cad.surfaces import nearest_copy
 from amprep.geometry.cad.topology import Topology
 from amprep.geometry.meshing.face_mesher import boundary_loops
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.uv_cdt import inside_loops
-from amprep.geometry.refine.sma import _nearest_copy
 
 #: the loops' edges are discretised at most this far (mm) from the exact edges: a point a few µm beyond a trim is off
 #: the face (CTC-02's mitred fillets: split points 5–10 µm beyond it crossed the next fillet's triangles)
@@ -51,4 +51,4 @@ class FaceDomains:
             return np.ones(len(uv), bool)
         loops, middle = known
         pts = np.asarray(uv, float)
-        return inside_loops(_nearest_copy(pts, np.broadcast_to(middle, pts.shape), periods), loops)
+        return inside_loops(nearest_copy(pts, np.broadcast_to(middle, pts.shape), periods), loops)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.cad.surfaces import Surface, project_points, tangents
+from amprep.geometry.cad.surfaces import Surface, nearest_copy, project_points, tangents
 from amprep.geometry.core.edges import face_edge_table
 from amprep.geometry.core.mesh import IN_FACE, Mesh
 from amprep.geometry.core.vectors import cross, norms, triangle_normals
@@ -87,15 +87,6 @@ def sma_output_size(mesh: Mesh, faces: list[int] | np.ndarray) -> int:
     edge_id, inner = face_edge_table(mesh)
     k = (~inner[edge_id[sel]]).sum(axis=1)
     return int((~sel).sum() + (27 + 2 * k).sum())
-
-
-def _nearest_copy(uv: np.ndarray, guess: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
-    """uv shifted by whole periods to lie nearest `guess` (both (N, 2))."""
-    out = uv.copy()
-    for d, per in enumerate(periods):
-        if per:
-            out[:, d] += np.round((guess[:, d] - uv[:, d]) / per) * per
-    return out
 
 
 def sma_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Surface],
@@ -310,8 +301,8 @@ def _labels(s: _Sections, ids: _Numbering, new_uv: np.ndarray,
     for f in np.unique(s.fid):
         rows, cols = np.nonzero(mask & (s.fid[:, None] == f))
         per = surfaces[int(f)].periods
-        own_e1[rows, cols] = _nearest_copy(new_uv[ids.ve1[rows, cols] - ids.n0], s.own1[rows, cols], per)
-        own_e2[rows, cols] = _nearest_copy(new_uv[ids.ve2[rows, cols] - ids.n0], s.own2[rows, cols], per)
+        own_e1[rows, cols] = nearest_copy(new_uv[ids.ve1[rows, cols] - ids.n0], s.own1[rows, cols], per)
+        own_e2[rows, cols] = nearest_copy(new_uv[ids.ve2[rows, cols] - ids.n0], s.own2[rows, cols], per)
     k = len(s.tri)
     nxt = np.roll(np.arange(3), -1)
     lab = np.zeros((k, 3, 12), np.int64)
