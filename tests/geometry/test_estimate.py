@@ -65,9 +65,9 @@ def test_the_quality_mesher_is_not_refused_for_what_the_b_rep_estimate_overstate
 
 
 def test_the_quality_meshers_estimate_refuses_before_any_face_is_meshed(monkeypatch):
-    """featuretype at 0.01 mm makes 55k quality triangles; under a limit of 30k its estimate refuses it once the edges
-    are discretised, before any face is meshed (six times its B-rep estimate, 27k, let it through to be stopped part
-    way)."""
+    """featuretype at 0.01 mm makes 52k quality triangles, 31k of them in lattice rows; under a limit of 45k its
+    estimate refuses it once the edges are discretised, before any face is meshed (six times its B-rep estimate, 27k,
+    let it through to be stopped part way)."""
     from amprep.geometry.meshing import enforce
 
     model = read_cad(corpus("featuretype_inch_ap214.step"))
@@ -80,7 +80,7 @@ def test_the_quality_meshers_estimate_refuses_before_any_face_is_meshed(monkeypa
 
     monkeypatch.setattr(enforce, "mesh_face", counted)
     with pytest.raises(AmprepError) as e:
-        mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=30_000, parallel=False))
+        mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=45_000, parallel=False))
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE and "before any face is meshed" in e.value.message
     assert not calls
 
@@ -91,5 +91,6 @@ def test_the_quality_meshers_estimate_counts_each_placement():
     model = read_cad(corpus("as1_assembly_ap214.stp"))
     once, each = (mesh_model(model, MeshParams(tolerance=0.1, mesher="quality", mesh_instances_once=o))
                   for o in (True, False))
-    assert once.mesh.n_triangles == each.mesh.n_triangles
+    assert abs(once.mesh.n_triangles - each.mesh.n_triangles) <= 0.01 * each.mesh.n_triangles
     assert abs(once.estimated_triangles - each.estimated_triangles) <= 0.01 * each.estimated_triangles
+    assert once.estimated_triangles > 2 * len(model.faces)
