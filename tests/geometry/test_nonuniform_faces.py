@@ -101,9 +101,10 @@ def test_the_lattice_refuses_rows_that_cannot_take_one_step():
 def test_smoothing_stops_when_a_round_gains_little(monkeypatch):
     """The smoothing rounds stop once one raises the mean smallest angle by under SMOOTH_GAIN: fewer node sets moved
     than with every round run, for a mean angle regularity within about that gain of theirs."""
-    from amprep.geometry.meshing import local_refine
+    from amprep.geometry.meshing import lattice, local_refine
 
     model = model_from_shape(_sheet("crowded"))
+    monkeypatch.setattr(lattice, "LATTICE_MIN", np.inf)  # the Delaunay path, which smooths (a lattice since 100)
     sets, inner = [], local_refine._independent
 
     def counted(*args):  # type: ignore[no-untyped-def]

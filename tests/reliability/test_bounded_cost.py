@@ -183,3 +183,35 @@ def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_wa
         mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", parallel=False, max_triangles=whole // 3))
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE
     assert 0 < len(calls) < len(model.faces)
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_one_face_stops_refining_at_the_triangle_limit(reference_solids, monkeypatch, mesher):
+    """A single face far over the limit, every estimate forced to nothing: the face's own meshing stops once it alone
+    would exceed the limit (its curvature cells, its refinement rounds); the face is never finished. The limit used to
+    be seen only once the face was done: OCCT's terrain, one face estimated at 7 M and needing ~30 M, refined for
+    over 300 s."""
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.meshing import enforce, lattice, prepare
+    from amprep.geometry.meshing.params import MeshParams
+    from amprep.geometry.meshing.pipeline import mesh_model
+
+    model = model_from_shape(reference_solids["torus"])
+    params = dict(tolerance=0.005, mesher=mesher, force_fallback=mesher == "occt", parallel=False)
+    monkeypatch.setattr(lattice, "LATTICE_MIN", np.inf)  # no rows (the torus has no pole): theirs is checked before
+    whole = mesh_model(model, MeshParams(**params)).mesh.n_triangles
+    monkeypatch.setattr(prepare, "estimate_triangles", lambda *a, **k: 1)
+    monkeypatch.setattr(enforce, "quality_estimate", lambda surfaces, *a, **k: np.zeros(len(surfaces)))
+    finished = []
+    real = enforce.mesh_face
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        patch = real(*args, **kwargs)
+        finished.append(len(patch.tris))
+        return patch
+
+    monkeypatch.setattr(enforce, "mesh_face", counted)
+    with pytest.raises(AmprepError) as e:
+        mesh_model(model, MeshParams(**params, max_triangles=whole // 10))
+    assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE and f"{whole // 10:,}" in e.value.message
+    assert len(model.faces) == 1 and not finished

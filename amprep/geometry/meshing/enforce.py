@@ -16,7 +16,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
-from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.core.progress import Progress, ProgressFn, budgeted
 from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
 from amprep.geometry.meshing.face_mesher import boundary_loops, mesh_face
 from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
@@ -136,7 +136,8 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
                            if p is not None and i not in redone))
 
     def remesh_face(i: int) -> FacePatch | None:
-        patch = mesh_one(i)
+        with budgeted((limit - made.add(0)) // int(f.uses[i]), limit):  # one face stops once it alone would be over
+            patch = mesh_one(i)
         # the estimate before meshing is an estimate: the limit is kept as the faces come, in every process at once
         if patch is not None and made.add(len(patch.tris) * int(f.uses[i])) > limit:
             raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew over the limit of {limit:,} triangles while "

@@ -13,6 +13,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.pcurve_shifts import ordered_edges
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, winds_inward
+from amprep.geometry.core.progress import within_budget
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.meshing.local_refine import (
     flip_flat_triangles,
@@ -266,6 +267,7 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
         new = apart(insertion_points(pts, tris[bad], seg_code, len(pts) + 1), pts, spacing)
         if not len(new):
             break
+        within_budget(len(tris) + 2 * len(new))
         pts = np.concatenate([pts, new])
         if quality:  # the quality mesher's minimum angle kept through the refinement
             pts, tris = quality_pslg(pts, segments, holes)

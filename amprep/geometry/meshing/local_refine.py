@@ -13,6 +13,7 @@ import numpy as np
 from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import edge_codes, edge_incidence
+from amprep.geometry.core.progress import within_budget
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.measure.regularity import min_angles
@@ -99,6 +100,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         new = apart(new, pts[np.unique(region)], spacing)
         if not len(new):
             break
+        within_budget(len(tris) + 2 * len(new))
         # a hole seed in every kept triangle across an inner edge of the region's border: Triangle must not fill
         # what the region surrounds (candidates: kept triangles with two nodes in the region)
         in_nodes = np.zeros(len(pts), bool)

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.core.progress import within_budget
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.uv_cdt import inside_loops, surface_speeds
 
@@ -84,10 +85,18 @@ def _split_count(parts: np.ndarray) -> np.ndarray:
     return np.clip(k, 1, MAX_SPLIT).astype(np.int64)
 
 
-def size_cells(surface: Surface, b_uv: np.ndarray, target: float) -> tuple[np.ndarray, np.ndarray] | None:
+def _shoelace(poly: np.ndarray) -> float:
+    """Signed area of a closed polygon (n, 2), counter-clockwise positive."""
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def size_cells(surface: Surface, b_uv: np.ndarray, target: float,
+               share: float = 1.0) -> tuple[np.ndarray, np.ndarray] | None:
     """Leaf cells (centers (n, 2), sizes (n, 2)) of the boundary's (u,v) box cut until, by the second form at each
     cell's centre, the deviation of its sides (|L| a²/8, |N| b²/8) and diagonals (|L a² ± 2M ab + N b²|/8) is at
-    most `target`; None past MAX_CELLS."""
+    most `target`; None past MAX_CELLS. `share` of the cells (the part of the box the face covers) is held to the
+    triangle budget (core.progress.within_budget), two triangles a cell."""
     lo, hi = b_uv.min(axis=0), b_uv.max(axis=0)
     span = np.maximum(hi - lo, 1e-12)
     step = DIFF_STEP * span
@@ -109,7 +118,9 @@ def size_cells(surface: Surface, b_uv: np.ndarray, target: float) -> tuple[np.nd
         centers, sizes, ku, kv = centers[~leaf], sizes[~leaf], ku[~leaf], kv[~leaf]
         if not len(centers):
             break
-        if (ku * kv).sum() + sum(map(len, leaf_c)) > MAX_CELLS:
+        cells = int((ku * kv).sum()) + sum(map(len, leaf_c))
+        within_budget(int(2 * cells * share))
+        if cells > MAX_CELLS:
             return None
         centers, sizes = split_cells(centers, sizes, ku, kv)
     leaf_c.append(centers)  # cells still over after MAX_LEVELS: refinement finishes them
@@ -159,7 +170,9 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
     b_uv = np.concatenate(loops)
     if (np.ptp(b_uv, axis=0) * length_scale <= 1e-9).any():
         return None
-    cells = size_cells(surface, b_uv, target)
+    box = float(np.prod(np.ptp(b_uv, axis=0)))
+    share = min(abs(sum(_shoelace(lp) for lp in loops)) / box, 1.0) if box > 0 else 1.0
+    cells = size_cells(surface, b_uv, target, share)
     if cells is None:
         return None
     centers, sizes = cells
