@@ -38,3 +38,23 @@ def reference_solids():
         "plate_with_holes": cq.Workplane().box(40, 30, 5).faces(">Z").workplane().rarray(20, 10, 2, 2)
         .hole(4).val().wrapped,
     }
+
+
+@pytest.fixture
+def meshed_faces(monkeypatch):
+    """enforce.mesh_face counted from here on: (started, finished), one entry per call begun and per face it
+    finished (its triangle count); clear them to count a later run only."""
+    from amprep.geometry.meshing import enforce
+
+    started: list[int] = []
+    finished: list[int] = []
+    real = enforce.mesh_face
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        started.append(1)
+        patch = real(*args, **kwargs)
+        finished.append(len(patch.tris))
+        return patch
+
+    monkeypatch.setattr(enforce, "mesh_face", counted)
+    return started, finished

@@ -64,25 +64,16 @@ def test_the_quality_mesher_is_not_refused_for_what_the_b_rep_estimate_overstate
     assert 0 < r.mesh.n_triangles <= 200_000 and r.max_error <= 0.05
 
 
-def test_the_quality_meshers_estimate_refuses_before_any_face_is_meshed(monkeypatch):
+def test_the_quality_meshers_estimate_refuses_before_any_face_is_meshed(meshed_faces):
     """featuretype at 0.01 mm makes 52k quality triangles, 31k of them in lattice rows; under a limit of 45k its
     estimate refuses it once the edges are discretised, before any face is meshed (six times its B-rep estimate, 27k,
     let it through to be stopped part way)."""
-    from amprep.geometry.meshing import enforce
-
     model = read_cad(corpus("featuretype_inch_ap214.step"))
-    calls = []
-    real = enforce.mesh_face
-
-    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(enforce, "mesh_face", counted)
+    started, _ = meshed_faces
     with pytest.raises(AmprepError) as e:
         mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=45_000, parallel=False))
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE and "before any face is meshed" in e.value.message
-    assert not calls
+    assert not started
 
 
 def test_the_quality_meshers_estimate_counts_each_placement():

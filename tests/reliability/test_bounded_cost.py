@@ -153,7 +153,7 @@ def test_a_cancel_seen_while_a_face_is_meshed_stops_the_meshing(reference_solids
     assert e.value.code == ErrorCode.CANCELLED and started
 
 
-def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_was_low(monkeypatch):
+def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_was_low(monkeypatch, meshed_faces):
     """Estimates far under the truth (forced: the B-rep estimated at one triangle, the quality mesher's faces at none)
     let a part past the checks before meshing; the limit is then kept face by face, so meshing stops with
     output_too_large once the faces made exceed it, not after every face is meshed (the quality mesher on OCCT's
@@ -169,14 +169,8 @@ def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_wa
     model = model_from_shape(plate.val().wrapped)
     params = MeshParams(tolerance=0.01, mesher="quality", parallel=False)
     whole = mesh_model(model, params).mesh.n_triangles
-    calls = []
-    real = enforce.mesh_face
-
-    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(enforce, "mesh_face", counted)
+    calls, _ = meshed_faces
+    calls.clear()
     monkeypatch.setattr(prepare, "estimate_triangles", lambda *a, **k: 1)
     monkeypatch.setattr(enforce, "quality_estimate", lambda surfaces, *a, **k: np.zeros(len(surfaces)))
     with pytest.raises(AmprepError) as e:
@@ -186,7 +180,7 @@ def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_wa
 
 
 @pytest.mark.parametrize("mesher", ["occt", "quality"])
-def test_one_face_stops_refining_at_the_triangle_limit(reference_solids, monkeypatch, mesher):
+def test_one_face_stops_refining_at_the_triangle_limit(reference_solids, monkeypatch, meshed_faces, mesher):
     """A single face far over the limit, every estimate forced to nothing: the face's own meshing stops once it alone
     would exceed the limit (its curvature cells, its refinement rounds); the face is never finished. The limit used to
     be seen only once the face was done: OCCT's terrain, one face estimated at 7 M and needing ~30 M, refined for
@@ -202,15 +196,8 @@ def test_one_face_stops_refining_at_the_triangle_limit(reference_solids, monkeyp
     whole = mesh_model(model, MeshParams(**params)).mesh.n_triangles
     monkeypatch.setattr(prepare, "estimate_triangles", lambda *a, **k: 1)
     monkeypatch.setattr(enforce, "quality_estimate", lambda surfaces, *a, **k: np.zeros(len(surfaces)))
-    finished = []
-    real = enforce.mesh_face
-
-    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
-        patch = real(*args, **kwargs)
-        finished.append(len(patch.tris))
-        return patch
-
-    monkeypatch.setattr(enforce, "mesh_face", counted)
+    _, finished = meshed_faces
+    finished.clear()
     with pytest.raises(AmprepError) as e:
         mesh_model(model, MeshParams(**params, max_triangles=whole // 10))
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE and f"{whole // 10:,}" in e.value.message
