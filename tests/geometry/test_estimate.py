@@ -65,9 +65,9 @@ def test_the_quality_mesher_is_not_refused_for_what_the_b_rep_estimate_overstate
 
 
 def test_the_quality_meshers_estimate_refuses_before_any_face_is_meshed(meshed_faces):
-    """featuretype at 0.01 mm makes 52k quality triangles, 31k of them in lattice rows; under a limit of 45k its
-    estimate refuses it once the edges are discretised, before any face is meshed (six times its B-rep estimate, 27k,
-    let it through to be stopped part way)."""
+    """featuretype at 0.01 mm makes over 50k quality triangles, fewer than 45k of them in lattice rows; under a limit
+    of 45k its estimate refuses it once the edges are discretised, before any face is meshed (six times its B-rep
+    estimate, 27k, let it through to be stopped part way)."""
     model = read_cad(corpus("featuretype_inch_ap214.step"))
     started, _ = meshed_faces
     with pytest.raises(AmprepError) as e:

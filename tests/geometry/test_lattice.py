@@ -221,25 +221,3 @@ def test_rows_over_the_triangle_limit_are_refused_before_they_are_made(reference
             mesh_model(model_from_shape(reference_solids["sphere"]), import_limit)
     assert err.value.code == ErrorCode.OUTPUT_TOO_LARGE and "rows alone" in str(err.value)
 
-
-def test_a_fillet_band_is_a_lattice_with_no_more_triangles_than_occt():
-    """A cylinder's 0.5 mm fillet (a quarter torus band, R 2.5 r 0.5) at 0.01 mm: its curvature along the band changes
-    across it, and the Delaunay path's rows of cells disagree; meshed so (a lattice of 712 triangles was under
-    LATTICE_MIN 1,000) it took 8,701 triangles, OCCT 905. As a lattice it takes no more than OCCT's, within the
-    tolerance of the exact torus."""
-    import cadquery as cq
-
-    from amprep.geometry.measure.regularity import regularity, summarize
-
-    solid = cq.Workplane("XY").circle(3).extrude(5).edges("<Z").fillet(0.5).val().wrapped
-    model = model_from_shape(solid)
-    quality, occt = (mesh_model(model, MeshParams(tolerance=0.01, mesher=m)).mesh for m in ("quality", "occt"))
-    _closed_solid(quality)
-    band = next(i for i, f in enumerate(quality.faces) if f.surface_type == "torus")
-    assert quality.faces[band].meshed_by == "lattice"
-    tris = quality.corners[quality.face_ids == band]
-    assert len(tris) <= np.count_nonzero(occt.face_ids == band)
-    p = _sample_triangles(type("M", (), {"corners": tris})())
-    dist = np.abs(np.hypot(np.linalg.norm(p[:, :2], axis=1) - 2.5, p[:, 2] - 0.5) - 0.5)
-    assert dist.max() <= 0.01 * 1.001
-    assert summarize(regularity(tris)).mean["angle"] >= 0.6

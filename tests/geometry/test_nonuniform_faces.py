@@ -104,7 +104,7 @@ def test_smoothing_stops_when_a_round_gains_little(monkeypatch):
     from amprep.geometry.meshing import lattice, local_refine
 
     model = model_from_shape(_sheet("crowded"))
-    monkeypatch.setattr(lattice, "LATTICE_MIN", np.inf)  # the Delaunay path, which smooths (a lattice since 100)
+    monkeypatch.setattr(lattice, "LATTICE_MIN", np.inf)  # the Delaunay path, which smooths, at any LATTICE_MIN
     sets, inner = [], local_refine._independent
 
     def counted(*args):  # type: ignore[no-untyped-def]

@@ -54,11 +54,12 @@ PCURVE_SAMPLES = 257
 #: a face needing more rows is left to the Delaunay path
 MAX_ROWS = 100_000
 #: a face whose lattice would have fewer triangles is left to the Delaunay path, whose refinement gives small faces
-#: better angles (a short row's staggered ends, a given boundary row's count meeting the lattice's). Not more: on a
-#: band whose curvature across it changes along it (a torus fillet) the Delaunay path's rows of cells disagree and its
-#: refinement fills them: OCCT's MODERN_Sink fillet at 0.01 mm took 8,709 triangles that way, 712 as a lattice (OCCT:
-#: 905); at 1,000 OCCT's 41 sample parts took 10 % more triangles at 0.1 mm, its mal_vis 4.4×
-LATTICE_MIN = 100
+#: better angles (a short row's staggered ends, a given boundary row's count meeting the lattice's) and costs little.
+#: At 100 a torus fillet band whose curvature along it changes across it (8,701 Delaunay triangles, OCCT 905) is a
+#: lattice of 712, and OCCT's sample parts take 10 % fewer; but as1's bolts, tight in their plates' holes, then
+#: get rows at the plates' faces, node on node with the holes' edges: distinct vertices one float32 apart, 430
+#: non-manifold edges in the STL at 0.01 mm. Kept at 1,000 until rows keep clear of other solids' nodes
+LATTICE_MIN = 1_000
 
 
 @dataclass(frozen=True)
