@@ -10,7 +10,13 @@ from typing import Any
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.core.checks import MeshChecks, check_mesh, float32_degenerate_count, manifold3d_accepts
+from amprep.geometry.core.checks import (
+    MeshChecks,
+    check_mesh,
+    float32_degenerate_count,
+    float32_joined,
+    manifold3d_accepts,
+)
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import ProgressFn
 from amprep.geometry.io.stl import read_stl
@@ -63,11 +69,11 @@ class ConvertResult:
 FORK_CHECKS_MIN = 100_000
 
 
-def output_checks(mesh: Mesh) -> tuple[MeshChecks, int]:
-    """(check_mesh, float32_degenerate_count) of a mesh."""
+def output_checks(mesh: Mesh) -> tuple[MeshChecks, int, tuple[int, int]]:
+    """(check_mesh, float32_degenerate_count, float32_joined) of a mesh."""
     degenerate = np.zeros(mesh.n_triangles, bool)
     checks = check_mesh(mesh, degenerate)
-    return checks, float32_degenerate_count(mesh, degenerate)
+    return checks, float32_degenerate_count(mesh, degenerate), float32_joined(mesh)
 
 
 def convert(path: str | Path, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> ConvertResult:
@@ -97,9 +103,12 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
     own = Forked(output_checks, mesh, fork=mesh.n_triangles >= FORK_CHECKS_MIN)
     ok3d = manifold3d_accepts(mesh)
     try:
-        checks, rounded = own.result()
+        checks, rounded, (joined, joined_nonmanifold) = own.result()
     except AmprepError:  # the child died: check here
-        checks, rounded = output_checks(mesh)
+        checks, rounded, (joined, joined_nonmanifold) = output_checks(mesh)
+    if joined_nonmanifold > checks.nonmanifold_edges:
+        notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch): a "
+                     f"reader that joins the file's vertices by position sees {joined_nonmanifold} non-manifold edges")
     if rounded:
         notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
                      "store (a part far from the origin at a micron tolerance)")

@@ -81,3 +81,33 @@ def test_winding_number_of_a_box_is_one_inside_and_zero_outside():
     v, t = _box((0, 0, 0), (2, 3, 4))
     w = winding_numbers(np.array([[1, 1, 1], [1.9, 2.9, 3.9], [3, 1, 1], [-1, -1, -1]], float), v[t])
     assert np.allclose(w, [1, 1, 0, 0], atol=1e-9)
+
+
+def test_solids_that_touch_are_apart_by_index_and_joined_in_the_file():
+    """Two unit cubes face to face, the second moved 2e-8 mm along x (its corners on the shared face distinct from the
+    first's in float64, one float32 position each): by index two closed shells; a reader that joins the file's
+    vertices by position sees the shared face's four sides and its diagonal used by four triangles each."""
+    from amprep.geometry.core.checks import check_mesh, float32_joined
+
+    a, b = _box((0, 0, 0), (1, 1, 1)), _box((1, 0, 0), (2, 1, 1))
+    touching = _mesh(a, (b[0] + [2e-8, 0, 0], b[1]))
+    assert check_mesh(touching).closed and check_mesh(touching).nonmanifold_edges == 0
+    assert float32_joined(touching) == (4, 5)
+    apart = _mesh(a, (b[0] + 1e-3, b[1]))
+    assert float32_joined(apart) == (0, 0)
+
+
+
+def test_convert_notes_what_a_reader_joining_by_position_sees(tmp_path):
+    """Two boxes of one STEP face to face: meshed apart (closed by index, each its own B-rep edges), their shared
+    face's nodes at one position; convert says what a reader that joins by position sees."""
+    import cadquery as cq
+
+    from amprep.jobs.convert import convert
+
+    boxes = cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), cq.Solid.makeBox(10, 10, 10, cq.Vector(10, 0, 0))])
+    path = tmp_path / "touching.step"
+    cq.exporters.export(cq.Workplane().add(boxes), str(path))
+    r = convert(path)
+    assert r.checks.closed and r.checks.shells == 2
+    assert any("float32 position" in n and "non-manifold" in n for n in r.notes), r.notes

@@ -70,6 +70,23 @@ def float32_degenerate_count(mesh: Mesh, degenerate: np.ndarray | None = None) -
     return int((degenerate_mask(rounded) & ~degenerate).sum())
 
 
+def float32_joined(mesh: Mesh) -> tuple[int, int]:
+    """(joined, nonmanifold): the vertices that share their float32 position (what STL and 3MF store) with another
+    vertex, less the positions they take, and the edges used by more than two triangles once vertices are joined by
+    that position, as a reader that welds a file by position sees them ((0, 0) when no two vertices share one). The
+    mesh's own checks go by index: two solids that touch stay apart there, not in the file."""
+    if mesh.n_triangles == 0:
+        return 0, 0
+    key = np.ascontiguousarray(mesh.vertices.astype(np.float32)).view(np.dtype((np.void, 12))).ravel()
+    _, at = np.unique(key, return_inverse=True)
+    joined = mesh.n_vertices - int(at.max()) - 1
+    if joined == 0:
+        return 0, 0
+    t = at.ravel()[mesh.triangles]
+    t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]
+    return joined, int((edge_incidence(t).count > 2).sum())
+
+
 def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.ndarray]:
     """(number of shells, (m,) label per triangle): triangles joined through shared edges (`inc`: the mesh's edge
     table when already made)."""
