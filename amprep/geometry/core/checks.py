@@ -8,7 +8,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from amprep.geometry.core.edges import EdgeIncidence, edge_incidence
+from amprep.geometry.core.edges import EdgeIncidence, distinct_corners, edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.vectors import cross, norms, triangle_normals
 
@@ -83,7 +83,7 @@ def float32_joined(mesh: Mesh) -> tuple[int, int]:
     if joined == 0:
         return 0, 0
     t = at.ravel()[mesh.triangles]
-    t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]
+    t = t[distinct_corners(t)]
     return joined, int((edge_incidence(t).count > 2).sum())
 
 

@@ -23,6 +23,12 @@ class EdgeIncidence:
     order: np.ndarray | None = None
 
 
+def distinct_corners(triangles: np.ndarray) -> np.ndarray:
+    """(m,) bool: the triangles (m, 3) whose three corner indices differ (the others collapsed to an edge or a point)."""
+    t = triangles
+    return (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])
+
+
 def edge_incidence(triangles: np.ndarray, with_order: bool = False) -> EdgeIncidence:
     """Undirected edge table of (m, 3) triangles; side k of a triangle joins corners k and k+1 (edges ordered by
     (low, high) vertex index, as np.unique would give them); `order` kept only when asked (3m int64)."""

@@ -57,14 +57,19 @@ def checking(fn: Callable[[], None] | None) -> Iterator[None]:
 _BUDGET: ContextVar[tuple[int, int] | None] = ContextVar("amprep_triangle_budget", default=None)
 
 
+def grew_over(limit: int) -> AmprepError:
+    """output_too_large for a mesh that outgrew `limit` triangles while it was made (an estimate let it start)."""
+    return AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew over the limit of {limit:,} triangles while it "
+                       "was made: use a coarser tolerance, the default mesher or a higher max_triangles")
+
+
 def within_budget(triangles: int) -> None:
     """output_too_large when `triangles` (what the face being meshed has, or is about to have) exceed the budget set by
     `budgeted`, if any: one face's refinement stops there, not once the face is done (a 30 M-triangle terrain face
     estimated at 7 M refined for over 300 s)."""
     budget = _BUDGET.get()
     if budget is not None and triangles > budget[0]:
-        raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew over the limit of {budget[1]:,} triangles while "
-                          "it was made: use a coarser tolerance, the default mesher or a higher max_triangles")
+        raise grew_over(budget[1])
 
 
 @contextmanager

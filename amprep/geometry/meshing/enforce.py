@@ -16,7 +16,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
-from amprep.geometry.core.progress import Progress, ProgressFn, budgeted
+from amprep.geometry.core.progress import Progress, ProgressFn, budgeted, grew_over
 from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
 from amprep.geometry.meshing.face_mesher import boundary_loops, mesh_face
 from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
@@ -117,6 +117,8 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     points of their old mesh); every edge is discretised first, before faces are meshed apart from each other."""
     target = f.tol * ENFORCE_MARGIN
     remesh = sorted(i for i in todo if f.surfaces[i] is not None)  # the lattices plan in face order
+    redone = set(remesh)
+    kept = sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches) if p is not None and i not in redone)
     for i in remesh:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
     if f.params.quality:
@@ -128,20 +130,17 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
                                 target, f.params.angular, f.params.max_triangles)
         f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
         if not f.estimated:
-            _estimate(f, remesh, loops, planned)
+            _estimate(f, remesh, loops, planned, kept)
 
     limit = f.params.max_triangles
-    redone = set(remesh)
-    made = SharedCount(sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches)
-                           if p is not None and i not in redone))
+    made = SharedCount(kept)
 
     def remesh_face(i: int) -> FacePatch | None:
         with budgeted((limit - made.add(0)) // int(f.uses[i]), limit):  # one face stops once it alone would be over
             patch = mesh_one(i)
         # the estimate before meshing is an estimate: the limit is kept as the faces come, in every process at once
         if patch is not None and made.add(len(patch.tris) * int(f.uses[i])) > limit:
-            raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"the mesh grew over the limit of {limit:,} triangles while "
-                              "it was made: use a coarser tolerance, the default mesher or a higher max_triangles")
+            raise grew_over(limit)
         return patch
 
     def mesh_one(i: int) -> FacePatch | None:
@@ -169,16 +168,15 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
             f.unmeshed.append(i)
 
 
-def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None]) -> None:  # type: ignore[type-arg]
+def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None],  # type: ignore[type-arg]
+              kept: int) -> None:
     """f.estimated: the quality mesher's estimate (prepare.quality_estimate) of the faces of `remesh` with their
-    boundary_loops `loops` and planned lattices, each × its uses, and the triangles other faces already have;
+    boundary_loops `loops` and planned lattices, each × its uses, and the `kept` triangles other faces already have;
     output_too_large when over the limit."""
     segments = [sum(max(len(f.topo.edge_params.get(f.topo.edge_index(e), ())) - 1, 0) for e in face_edges(f.model.faces[i]))
                 for i in remesh]
     rows = [p.expected if p is not None else None for p in planned]
     expected = quality_estimate([f.surfaces[i] for i in remesh], loops, segments, rows, f.tol)  # type: ignore[misc]
-    redone = set(remesh)
-    kept = sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches) if p is not None and i not in redone)
     f.estimated = refuse_quality_too_large(expected * f.uses[remesh], kept, f.tol, f.params.max_triangles)
 
 

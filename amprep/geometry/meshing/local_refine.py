@@ -12,7 +12,7 @@ import numpy as np
 
 from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.core.edges import edge_codes, edge_incidence
+from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.progress import within_budget
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
@@ -148,7 +148,7 @@ def flat_triangles(patch: FacePatch, min_area: float = 0.0, rel_eps: float = NEE
     v = patch.node_vertex[t]
     same_vertex = (((v[:, 0] == v[:, 1]) & (v[:, 0] >= 0)) | ((v[:, 1] == v[:, 2]) & (v[:, 1] >= 0))
                    | ((v[:, 0] == v[:, 2]) & (v[:, 0] >= 0)))
-    distinct = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2]) & ~same_vertex
+    distinct = distinct_corners(t) & ~same_vertex
     e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
     normal = cross(e1, e2)
     area2_sq = np.einsum("ij,ij->i", normal, normal)  # (2·area)², compared squared: no square roots

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume
-from amprep.geometry.core.edges import edge_codes, edge_incidence
+from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -59,7 +59,7 @@ def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np
     uv = np.concatenate([
         p.uv[p.tris] if p.uv is not None else np.full((len(p.tris), 3, 2), np.nan) for p in patches
     ])
-    keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
+    keep = distinct_corners(tris)
     keep[keep] = ~fins(tris[keep], face_ids[keep], (dim[first] != IN_FACE)[tris[keep]].all(axis=1))
     tris, face_ids, uv = tris[keep], face_ids[keep], uv[keep]
     used = np.flatnonzero(np.bincount(tris.reshape(-1), minlength=len(first)))
@@ -121,7 +121,7 @@ def pole_folds(patch: FacePatch) -> bool:
     key = np.where(patch.node_vertex >= 0, patch.node_vertex, patch.node_vertex.max(initial=0) + 1
                    + np.arange(len(patch.node_vertex)))
     tris = key[patch.tris]
-    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])]
+    tris = tris[distinct_corners(tris)]
     if len(tris) == 0:
         return False
     _, tris = np.unique(tris, return_inverse=True)
