@@ -268,7 +268,7 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         np.minimum.at(best, t2[ok], rank)
         pick = ok[(best[t1[ok]] == rank) & (best[t2[ok]] == rank)]
         both = np.concatenate([new1[pick], new2[pick]])
-        e = triangle_chordal_error(xyz[both], uv[both], surface, order, affine=surface.affine)
+        e = triangle_chordal_error(xyz[both], uv[both], surface, order, affine=surface.affine, stop=tolerance)
         keep = (e[:len(pick)] <= tolerance) & (e[len(pick):] <= tolerance)
         if not keep.any():
             break
@@ -365,7 +365,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
             new_err = err[star].copy()  # measured only where the move may still be kept
             check = np.flatnonzero(keep[owner])
             new_err[check] = triangle_chordal_error(trial_xyz[t[check]], trial_uv[t[check]], surface, order,
-                                                    affine=surface.affine)
+                                                    affine=surface.affine, stop=tolerance)
             keep[owner[new_err > tolerance]] = False
             uv[keep], xyz[keep] = trial_uv[keep], trial_xyz[keep]
             took = keep[owner]
