@@ -40,6 +40,13 @@ class ConvertResult:
     provenance: dict[str, Any]
     notes: list[str] = field(default_factory=list)
     float32_degenerate: int = 0  # triangles degenerate only after rounding to the file's float32 coordinates
+    float32_joined: int = 0  # vertices that share their float32 position with another (solids that touch)
+    nonmanifold_as_written: int = 0  # non-manifold edges once the file's vertices are joined by position
+
+    @property
+    def closed_as_written(self) -> bool:
+        """Closed by index and still closed for a reader that joins the file's vertices by their float32 position."""
+        return self.checks.closed and self.nonmanifold_as_written == 0
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of the conversion (the `convert` part of a job's report)."""
@@ -47,7 +54,9 @@ class ConvertResult:
         out: dict[str, Any] = {
             "input": self.input,
             "mesh": mesh_section(self.mesh, c, self.manifold3d)
-            .with_extra(float32_degenerate_triangles=self.float32_degenerate).to_json(),
+            .with_extra(float32_degenerate_triangles=self.float32_degenerate, float32_joined_vertices=self.float32_joined,
+                        nonmanifold_edges_as_written=self.nonmanifold_as_written,
+                        closed_as_written=self.closed_as_written).to_json(),
             "provenance": self.provenance,
             "notes": self.notes,
         }
@@ -106,15 +115,17 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
         checks, rounded, (joined, joined_nonmanifold) = own.result()
     except AmprepError:  # the child died: check here
         checks, rounded, (joined, joined_nonmanifold) = output_checks(mesh)
-    if joined_nonmanifold > checks.nonmanifold_edges:
+    as_written = joined_nonmanifold if joined else checks.nonmanifold_edges
+    if as_written > checks.nonmanifold_edges:
         notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch): a "
-                     f"reader that joins the file's vertices by position sees {joined_nonmanifold} non-manifold edges")
+                     f"reader that joins the file's vertices by position sees {as_written} non-manifold edges")
     if rounded:
         notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
                      "store (a part far from the origin at a micron tolerance)")
     if not checks.closed:
         notes.append(f"the mesh is open: {checks.boundary_edges} boundary and {checks.nonmanifold_edges} non-manifold edges")
-    return ConvertResult(mesh, info, checks, ok3d, meshing, provenance(params if meshing else None), notes, rounded)
+    return ConvertResult(mesh, info, checks, ok3d, meshing, provenance(params if meshing else None), notes, rounded,
+                         joined, as_written)
 
 
 def header_text(result: ConvertResult) -> str:
