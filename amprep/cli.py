@@ -93,8 +93,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
     if not args.quiet:
         m, c = result.meshing, result.checks
         state = "closed" if c.closed else f"OPEN ({c.boundary_edges} boundary, {c.nonmanifold_edges} non-manifold edges)"
-        if c.closed and not result.closed_as_written:
-            state = f"closed by index, {result.nonmanifold_as_written} non-manifold edges once joined by position"
+        if c.closed and not result.closed_by_position and str(args.output).lower().endswith(".stl"):
+            state = f"closed by index, {result.nonmanifold_by_position} non-manifold edges once joined by position"
         line = f"{args.output}: {c.triangles:,} triangles, {state}, {written['bytes']:,} bytes"
         if m is not None:
             line += f"; max chordal error {m.max_error:.4g} mm (tolerance {m.tolerance:.4g} mm)"

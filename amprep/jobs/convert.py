@@ -41,12 +41,13 @@ class ConvertResult:
     notes: list[str] = field(default_factory=list)
     float32_degenerate: int = 0  # triangles degenerate only after rounding to the file's float32 coordinates
     float32_joined: int = 0  # vertices that share their float32 position with another (solids that touch)
-    nonmanifold_as_written: int = 0  # non-manifold edges once the file's vertices are joined by position
+    nonmanifold_by_position: int = 0  # non-manifold edges once vertices are joined by their float32 position
 
     @property
-    def closed_as_written(self) -> bool:
-        """Closed by index and still closed for a reader that joins the file's vertices by their float32 position."""
-        return self.checks.closed and self.nonmanifold_as_written == 0
+    def closed_by_position(self) -> bool:
+        """Closed by index and still closed once vertices are joined by their float32 position, as a reader of an STL
+        (which has no indices) joins them; a 3MF keeps each solid its own object and its indices."""
+        return self.checks.closed and self.nonmanifold_by_position == 0
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of the conversion (the `convert` part of a job's report)."""
@@ -55,8 +56,8 @@ class ConvertResult:
             "input": self.input,
             "mesh": mesh_section(self.mesh, c, self.manifold3d)
             .with_extra(float32_degenerate_triangles=self.float32_degenerate, float32_joined_vertices=self.float32_joined,
-                        nonmanifold_edges_as_written=self.nonmanifold_as_written,
-                        closed_as_written=self.closed_as_written).to_json(),
+                        nonmanifold_edges_by_position=self.nonmanifold_by_position,
+                        closed_by_position=self.closed_by_position).to_json(),
             "provenance": self.provenance,
             "notes": self.notes,
         }
@@ -115,17 +116,18 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
         checks, rounded, (joined, joined_nonmanifold) = own.result()
     except AmprepError:  # the child died: check here
         checks, rounded, (joined, joined_nonmanifold) = output_checks(mesh)
-    as_written = joined_nonmanifold if joined else checks.nonmanifold_edges
-    if as_written > checks.nonmanifold_edges:
+    by_position = joined_nonmanifold if joined else checks.nonmanifold_edges
+    if by_position > checks.nonmanifold_edges:
         notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch): a "
-                     f"reader that joins the file's vertices by position sees {as_written} non-manifold edges")
+                     f"reader that joins an STL's vertices by position sees {by_position} non-manifold edges (a 3MF "
+                     "keeps each solid its own object)")
     if rounded:
         notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
                      "store (a part far from the origin at a micron tolerance)")
     if not checks.closed:
         notes.append(f"the mesh is open: {checks.boundary_edges} boundary and {checks.nonmanifold_edges} non-manifold edges")
     return ConvertResult(mesh, info, checks, ok3d, meshing, provenance(params if meshing else None), notes, rounded,
-                         joined, as_written)
+                         joined, by_position)
 
 
 def header_text(result: ConvertResult) -> str:

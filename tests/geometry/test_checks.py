@@ -115,8 +115,8 @@ def test_convert_notes_what_a_reader_joining_by_position_sees(tmp_path):
     assert r.checks.closed and r.checks.shells == 2
     assert any("float32 position" in n and "non-manifold" in n for n in r.notes), r.notes
     mesh = r.summary()["mesh"]
-    assert mesh["closed_by_edges"] and not mesh["closed_as_written"]
-    assert mesh["float32_joined_vertices"] > 0 and mesh["nonmanifold_edges_as_written"] > 0
+    assert mesh["closed_by_edges"] and not mesh["closed_by_position"]
+    assert mesh["float32_joined_vertices"] > 0 and mesh["nonmanifold_edges_by_position"] > 0
     # the file read back and joined by position in plain Python (not our checks): edges used by more than two
     out = tmp_path / "touching.stl"
     write_result(r, out)
@@ -127,11 +127,11 @@ def test_convert_notes_what_a_reader_joining_by_position_sees(tmp_path):
         for k in range(3):
             side = frozenset((keys[k], keys[(k + 1) % 3]))
             sides[side] = sides.get(side, 0) + 1
-    assert sum(n > 2 for n in sides.values()) == mesh["nonmanifold_edges_as_written"]
+    assert sum(n > 2 for n in sides.values()) == mesh["nonmanifold_edges_by_position"]
     said = subprocess.run([sys.executable, "-m", "amprep", "convert", str(path), "-o", str(tmp_path / "cli.stl")],
                           capture_output=True, encoding="utf-8", errors="replace", timeout=300)
     assert said.returncode == 0 and "closed by index" in said.stdout, said.stdout + said.stderr
     one = tmp_path / "one.step"
     cq.exporters.export(cq.Workplane().box(10, 10, 10), str(one))
     alone = convert(one).summary()["mesh"]
-    assert alone["closed_as_written"] and alone["float32_joined_vertices"] == 0
+    assert alone["closed_by_position"] and alone["float32_joined_vertices"] == 0
