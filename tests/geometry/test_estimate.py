@@ -85,3 +85,22 @@ def test_the_quality_meshers_estimate_counts_each_placement():
     assert abs(once.mesh.n_triangles - each.mesh.n_triangles) <= 0.01 * each.mesh.n_triangles
     assert abs(once.estimated_triangles - each.estimated_triangles) <= 0.01 * each.estimated_triangles
     assert once.estimated_triangles > 2 * len(model.faces)
+
+
+def test_the_quality_mesher_chooses_its_evaluator_by_its_own_estimate(monkeypatch):
+    """bspline_45 at 0.01 mm: the B-rep estimate (5k) would measure in numpy; the quality mesher makes ~87k triangles
+    on B-splines, so its own estimate, made before any face is meshed, runs its faces on the compiled kernels (2 ×
+    faster) and in parallel by each face's estimate. The mesh does not depend on the kernels being loaded before."""
+    from amprep.geometry.measure.chordal import worth_compiling
+    from amprep.geometry.meshing import enforce
+
+    chosen: list[bool] = []
+    real = enforce.compiled
+    monkeypatch.setattr(enforce, "compiled", lambda on: chosen.append(on) or real(on))
+    model = read_cad(corpus("bspline_45_faces.iges"))
+    params = MeshParams(tolerance=0.01, mesher="quality")
+    result = mesh_model(model, params)
+    assert not worth_compiling(estimate_triangles(model, 0.01, params.angular), params.check_order)
+    n = result.estimated_triangles  # every face a B-spline
+    assert worth_compiling(n, params.check_order, n) and chosen == [True]
+    assert result.mesh.n_triangles > 50_000 and result.max_error <= 0.01

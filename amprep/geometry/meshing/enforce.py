@@ -8,6 +8,7 @@ over the tolerance whose boundary stands is mended locally (local_refine.py), an
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,8 +17,9 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
+from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.progress import Progress, ProgressFn, budgeted, grew_over
-from amprep.geometry.measure.chordal import kernels_loaded, triangle_chordal_error
+from amprep.geometry.measure.chordal import kernels_loaded, load_kernels, triangle_chordal_error, worth_compiling
 from amprep.geometry.meshing.face_mesher import boundary_loops, mesh_face
 from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
 from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
@@ -78,6 +80,8 @@ class FaceStates:
     lattice: dict[int, Field] = field(default_factory=dict)  # faces whose rows lattice.plan_lattices set
     uses: np.ndarray = field(default=None)  # type: ignore[assignment]  # (F,) faces of the model each stands for
     estimated: int = 0  # the quality mesher's estimate, once made (_estimate)
+    compiled: bool = False  # its faces meshed with the compiled kernels, as that estimate decided (_estimate)
+    expected: dict[int, float] = field(default_factory=dict)  # that estimate per face, meshed once (_estimate)
 
     def __post_init__(self) -> None:
         self.errors = [np.zeros(0)] * len(self.patches)
@@ -130,7 +134,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
                                 target, f.params.angular, f.params.max_triangles)
         f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
         if not f.estimated:
-            _estimate(f, remesh, loops, planned, kept)
+            f.compiled = _estimate(f, remesh, loops, planned, kept)
 
     limit = f.params.max_triangles
     made = SharedCount(kept)
@@ -162,22 +166,32 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
                 raise
             return None
 
-    for i, patch in _costliest_first(remesh_face, remesh, f.patches, f.errors, target).items():
+    if f.compiled:
+        load_kernels()  # before the face pool forks: its processes inherit them
+    with compiled(True) if f.compiled else nullcontext():
+        meshed = _costliest_first(remesh_face, remesh, f.patches, f.errors, target, f.expected)
+    for i, patch in meshed.items():
         f.patches[i] = patch
         if patch is None:
             f.unmeshed.append(i)
 
 
 def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None],  # type: ignore[type-arg]
-              kept: int) -> None:
+              kept: int) -> bool:
     """f.estimated: the quality mesher's estimate (prepare.quality_estimate) of the faces of `remesh` with their
     boundary_loops `loops` and planned lattices, each × its uses, and the `kept` triangles other faces already have;
-    output_too_large when over the limit."""
+    output_too_large when over the limit. Returns chordal.worth_compiling of that estimate (its B-spline and Bézier
+    share apart): whether the faces are meshed with the compiled kernels, decided by the part alone before any is."""
     segments = [sum(max(len(f.topo.edge_params.get(f.topo.edge_index(e), ())) - 1, 0) for e in face_edges(f.model.faces[i]))
                 for i in remesh]
     rows = [p.expected if p is not None else None for p in planned]
     expected = quality_estimate([f.surfaces[i] for i in remesh], loops, segments, rows, f.tol)  # type: ignore[misc]
-    f.estimated = refuse_quality_too_large(expected * f.uses[remesh], kept, f.tol, f.params.max_triangles)
+    f.expected = {i: REMESH_PER_FACE + float(n) for i, n in zip(remesh, expected, strict=True)}
+    placed = expected * f.uses[remesh]
+    f.estimated = refuse_quality_too_large(placed, kept, f.tol, f.params.max_triangles)
+    free_form = sum(n for n, i in zip(placed, remesh, strict=True)
+                    if f.surfaces[i].surface_type in ("bspline", "bezier") and f.surfaces[i].data is not None)  # type: ignore[union-attr]
+    return worth_compiling(f.estimated, f.params.check_order, round(free_form))
 
 
 def _open_collapsed_loops(f: FaceStates, faces: set[int]) -> set[int]:
@@ -266,11 +280,13 @@ def _mend(f: FaceStates, over: list[int], todo: set[int]) -> None:
 
 
 def _costliest_first(fn: Callable[[int], FacePatch | None], faces: list[int], patches: list[FacePatch | None],
-                     errors: list[np.ndarray], target: float) -> dict[int, FacePatch | None]:
-    """{i: fn(i)} for the faces, through face_pool.map_faces, costliest first by _remesh_cost; in parallel once the
-    compiled kernels are loaded (which evaluator measures is the part's choice, core/compiled.py, so the result is
-    the same either way)."""
-    cost = {i: _remesh_cost(patches[i], errors[i], target) for i in faces}
+                     errors: list[np.ndarray], target: float,
+                     expected: dict[int, float] | None = None) -> dict[int, FacePatch | None]:
+    """{i: fn(i)} for the faces, through face_pool.map_faces, costliest first by `expected` (face_pool's unit: the
+    quality mesher's estimate) where given, else by _remesh_cost; in parallel once the compiled kernels are loaded
+    (which evaluator measures is the part's choice, core/compiled.py, so the result is the same either way)."""
+    known = expected or {}
+    cost = {i: known[i] if i in known else _remesh_cost(patches[i], errors[i], target) for i in faces}
     order = sorted(faces, key=lambda i: (-cost[i], i))
     return map_faces(fn, order, ready=kernels_loaded, cost=[cost[i] for i in order])
 
