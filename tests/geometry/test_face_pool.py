@@ -98,3 +98,4 @@ def test_a_shared_count_adds_up_across_the_forked_processes():
     totals = sorted(t for _, t in seen.values())
     assert len({pid for pid, _ in seen.values()}) == 2
     assert totals[-1] == 5 + sum(range(1, 41)) and len(set(totals)) == 40
+    assert count.value == totals[-1]  # what the children added is read here too

@@ -140,7 +140,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     made = SharedCount(kept)
 
     def remesh_face(i: int) -> FacePatch | None:
-        with budgeted((limit - made.add(0)) // int(f.uses[i]), limit):  # one face stops once it alone would be over
+        with budgeted((limit - made.value) // int(f.uses[i]), limit):  # one face stops once it alone would be over
             patch = mesh_one(i)
         # the estimate before meshing is an estimate: the limit is kept as the faces come, in every process at once
         if patch is not None and made.add(len(patch.tris) * int(f.uses[i])) > limit:

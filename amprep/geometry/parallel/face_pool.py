@@ -28,6 +28,14 @@ class SharedCount:
         self._shared = mp.get_context("fork").Value("q", start) if fork_available() else None
         self._local = start
 
+    @property
+    def value(self) -> int:
+        """The total now."""
+        if self._shared is None:
+            return self._local
+        with self._shared.get_lock():
+            return int(self._shared.value)
+
     def add(self, k: int) -> int:
         if self._shared is None:
             self._local += k
