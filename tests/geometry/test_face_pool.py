@@ -99,3 +99,21 @@ def test_a_shared_count_adds_up_across_the_forked_processes():
     assert len({pid for pid, _ in seen.values()}) == 2
     assert totals[-1] == 5 + sum(range(1, 41)) and len(set(totals)) == 40
     assert count.value == totals[-1]  # what the children added is read here too
+
+
+@pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
+def test_a_dominant_face_runs_here_first_on_every_numba_thread():
+    """An id costing DOMINANT × all after it is computed in this process before any fork, with numba's threads as
+    they were (a forked pool gives each process one); the rest are shared out."""
+    import numba
+
+    load_kernels()
+    threads = numba.get_num_threads()
+
+    def who(i):
+        time.sleep(0.02)
+        return os.getpid(), numba.get_num_threads()
+
+    out = face_pool.map_faces(who, range(30), cost=[100.0] + [1.0] * 29, parallel_min=0, workers=2)
+    assert out[0] == (os.getpid(), threads)
+    assert len({pid for pid, _ in out.values()}) == 2 and {n for _, n in list(out.values())[1:]} == {1}
