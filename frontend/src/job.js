@@ -171,8 +171,19 @@ function report(r) {
   const m = r.mesh || {};
   parts.push(el('h3', { text: 'Mesh' }), table('mesh checks', [
     ['triangles', m.triangles], ['vertices', m.vertices], ['watertight', String(m.watertight)], ['manifold3d accepts', String(m.manifold3d)],
+    ['closed once joined by position (as an STL reader joins it)', m.closed_by_position == null ? undefined : String(m.closed_by_position)],
     ['boundary edges', m.boundary_edges], ['non-manifold edges', m.nonmanifold_edges], ['self-intersections', m.self_intersections?.count],
     ['shells', m.shells], ['volume (mm³)', m.volume], ['area (mm²)', m.area]].filter((x) => x[1] !== undefined)));
+  const g = r.meshing;
+  if (g) {
+    parts.push(el('h3', { text: 'Meshing' }), table('meshing', [
+      ['tolerance (mm)', g.tolerance], ['max chordal error (mm)', g.max_chordal_error],
+      ['within tolerance', g.within_tolerance == null ? undefined : String(g.within_tolerance)],
+      ['estimated triangles', g.estimated_triangles],
+      ['faces unmeshed', g.unmeshed_faces?.length],
+      ...Object.entries(g.faces_by_method || {}).map(([k, n]) => [`faces meshed by ${k}`, n])].filter((x) => x[1] !== undefined)));
+  }
+  if (r.notes?.length) parts.push(el('h3', { text: 'Notes' }), el('ul', {}, r.notes.map((n) => el('li', { text: n }))));
   const stats = [];
   if (r.chordal_error) stats.push(['chordal error (mm)', r.chordal_error.mean, r.chordal_error.max]);
   for (const k of ['approximate', 'bounding_box']) if (r.cusp_height?.[k]) stats.push([`cusp height, ${k.replace('_', ' ')} (mm)`, r.cusp_height[k].mean, r.cusp_height[k].max]);
@@ -207,7 +218,8 @@ async function plots(job) {
 async function ended(job) {
   artifacts(job);
   if (job.status !== 'succeeded') { $('#viewer-card').hidden = true; return; }
-  if (art('report.json')) { page.report = await json(art('report.json').url); report(page.report); }
+  const summary = art('report.json') || art('summary.json');  // analyze and refine: report.json; convert: summary.json
+  if (summary) { page.report = await json(summary.url); report(page.report); }
   await viewer(job);
   await plots(job);
 }

@@ -186,6 +186,33 @@ def test_refine_before_after(page, service: Service) -> None:
         page.locator("#view-main").get_attribute("data-triangles"))
 
 
+def test_convert_summary_on_the_job_page(page, service: Service, tmp_path: Path) -> None:
+    """A convert job's page shows its summary.json: the mesh checks (closed by index, not once joined by position for
+    two boxes of one STEP face to face), the meshing's tolerance and worst chordal error, and the notes."""
+    import cadquery as cq
+
+    path = tmp_path / "touching.step"
+    boxes = cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), cq.Solid.makeBox(10, 10, 10, cq.Vector(10, 0, 0))])
+    cq.exporters.export(cq.Workplane().add(boxes), str(path))
+    with service.client() as c:
+        job = submit(c, path, "convert", '{"tolerance": 0.05}', wait=170).json()
+        assert job["status"] == "succeeded", job
+        art = next(a for a in job["artifacts"] if a["name"] == "summary.json")
+        summary = c.get(art["url"]).json()
+    page.goto(f"{service.url}/jobs/{job['id']}")
+    page.locator("#report h3", has_text="Meshing").wait_for()
+
+    def cell(name: str) -> str:
+        return page.locator("#report tr", has=page.locator("th", has_text=name)).first.locator("td").inner_text()
+
+    assert cell("watertight") == "true" and cell("closed once joined by position") == "false"
+    assert summary["mesh"]["closed_by_position"] is False and summary["mesh"]["watertight"] is True
+    assert float(cell("tolerance (mm)")) == 0.05
+    assert float(cell("max chordal error (mm)")) <= 0.05 and cell("within tolerance") == "true"
+    notes = page.locator("#report li").all_inner_texts()
+    assert any("float32 position" in n for n in notes) and notes == summary["notes"]
+
+
 def test_form_from_definitions(page, service: Service) -> None:
     """The form's fields are the kind's parameters with their defaults and bounds; a value out of bounds is refused
     in the page, before any upload."""
