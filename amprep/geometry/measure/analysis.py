@@ -10,7 +10,7 @@ import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.core.checks import check_mesh, float32_joined, manifold3d_accepts
 from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.mesh import Mesh
@@ -163,7 +163,11 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     prog("self-intersections", 0.15)
     n_si, si_examples, si_complete = self_intersections(mesh, params.intersection_examples,
                                                          prog.span(0.15, 0.35))
-    section = replace(mesh_section(mesh, checks, ok3d), defects={
+    joined, joined_nonmanifold = float32_joined(mesh)
+    by_position = joined_nonmanifold if joined else checks.nonmanifold_edges
+    section = replace(mesh_section(mesh, checks, ok3d).with_extra(
+        float32_joined_vertices=joined, nonmanifold_edges_by_position=by_position,
+        closed_by_position=checks.closed and by_position == 0), defects={
         "boundary_loops": {"count": len(loops), "total_length": float(sum(loops)), "lengths": loops[:100]},
         "nonmanifold_vertices": int(len(nmv)),
         "self_intersections": {"count": n_si, "examples": si_examples.tolist(), "complete": si_complete},
