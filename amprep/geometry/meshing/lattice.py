@@ -20,7 +20,7 @@ from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.shared_edges import has_pole, split_segments
 from amprep.geometry.meshing.uv_cdt import surface_speeds
-from amprep.geometry.meshing.uv_seed import DIFF_STEP, second_form
+from amprep.geometry.meshing.uv_seed import DIFF_STEP, polygon_area, second_form
 
 #: closed_form kinds (cad/surfaces.py) the lattice meshes: cylinder, cone, sphere, torus
 KINDS = (1, 2, 3, 4)
@@ -95,8 +95,7 @@ def rectangle_sides(loop: dict) -> Sides | None:  # type: ignore[type-arg]
                    abs(uv[:, 1] - v0) <= eps_v, abs(uv[:, 1] - v1) <= eps_v], axis=1)  # left right bottom top
     if not (on & np.roll(on, -1, axis=0)).any(axis=1).all():
         return None
-    x, y = uv[:, 0], uv[:, 1]
-    area = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    area = polygon_area(uv)
     if abs(abs(area) - (u1 - u0) * (v1 - v0)) > 1e-6 * (u1 - u0) * (v1 - v0):
         return None
     idx = [np.flatnonzero(on[:, k]) for k in range(4)]

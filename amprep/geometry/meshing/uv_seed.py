@@ -85,8 +85,8 @@ def _split_count(parts: np.ndarray) -> np.ndarray:
     return np.clip(k, 1, MAX_SPLIT).astype(np.int64)
 
 
-def _shoelace(poly: np.ndarray) -> float:
-    """Signed area of a closed polygon (n, 2), counter-clockwise positive."""
+def polygon_area(poly: np.ndarray) -> float:
+    """Signed area of a closed polygon (n, 2) by the shoelace formula, counter-clockwise positive."""
     x, y = poly[:, 0], poly[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
@@ -171,7 +171,7 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
     if (np.ptp(b_uv, axis=0) * length_scale <= 1e-9).any():
         return None
     box = float(np.prod(np.ptp(b_uv, axis=0)))
-    share = min(abs(sum(_shoelace(lp) for lp in loops)) / box, 1.0) if box > 0 else 1.0
+    share = min(abs(sum(polygon_area(lp) for lp in loops)) / box, 1.0) if box > 0 else 1.0
     cells = size_cells(surface, b_uv, target, share)
     if cells is None:
         return None
