@@ -13,6 +13,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.core.checks import (
     MeshChecks,
     check_mesh,
+    closed_by_position,
     float32_degenerate_count,
     float32_joined,
     manifold3d_accepts,
@@ -47,7 +48,7 @@ class ConvertResult:
     def closed_by_position(self) -> bool:
         """Closed by index and still closed once vertices are joined by their float32 position, as a reader of an STL
         (which has no indices) joins them; a 3MF keeps each solid its own object and its indices."""
-        return self.checks.closed and self.nonmanifold_by_position == 0
+        return closed_by_position(self.checks, self.nonmanifold_by_position)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of the conversion (the `convert` part of a job's report)."""
@@ -55,9 +56,8 @@ class ConvertResult:
         out: dict[str, Any] = {
             "input": self.input,
             "mesh": mesh_section(self.mesh, c, self.manifold3d)
-            .with_extra(float32_degenerate_triangles=self.float32_degenerate, float32_joined_vertices=self.float32_joined,
-                        nonmanifold_edges_by_position=self.nonmanifold_by_position,
-                        closed_by_position=self.closed_by_position).to_json(),
+            .with_extra(float32_degenerate_triangles=self.float32_degenerate)
+            .with_position(self.float32_joined, self.nonmanifold_by_position).to_json(),
             "provenance": self.provenance,
             "notes": self.notes,
         }
@@ -83,7 +83,7 @@ def output_checks(mesh: Mesh) -> tuple[MeshChecks, int, tuple[int, int]]:
     """(check_mesh, float32_degenerate_count, float32_joined) of a mesh."""
     degenerate = np.zeros(mesh.n_triangles, bool)
     checks = check_mesh(mesh, degenerate)
-    return checks, float32_degenerate_count(mesh, degenerate), float32_joined(mesh)
+    return checks, float32_degenerate_count(mesh, degenerate), float32_joined(mesh, checks.nonmanifold_edges)
 
 
 def convert(path: str | Path, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> ConvertResult:
@@ -113,10 +113,9 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
     own = Forked(output_checks, mesh, fork=mesh.n_triangles >= FORK_CHECKS_MIN)
     ok3d = manifold3d_accepts(mesh)
     try:
-        checks, rounded, (joined, joined_nonmanifold) = own.result()
+        checks, rounded, (joined, by_position) = own.result()
     except AmprepError:  # the child died: check here
-        checks, rounded, (joined, joined_nonmanifold) = output_checks(mesh)
-    by_position = joined_nonmanifold if joined else checks.nonmanifold_edges
+        checks, rounded, (joined, by_position) = output_checks(mesh)
     if by_position > checks.nonmanifold_edges:
         notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch): a "
                      f"reader that joins an STL's vertices by position sees {by_position} non-manifold edges (a 3MF "

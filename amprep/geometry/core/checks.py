@@ -70,21 +70,28 @@ def float32_degenerate_count(mesh: Mesh, degenerate: np.ndarray | None = None) -
     return int((degenerate_mask(rounded) & ~degenerate).sum())
 
 
-def float32_joined(mesh: Mesh) -> tuple[int, int]:
-    """(joined, nonmanifold): the vertices that share their float32 position (what STL and 3MF store) with another
-    vertex, less the positions they take, and the edges used by more than two triangles once vertices are joined by
-    that position, as a reader that welds a file by position sees them ((0, 0) when no two vertices share one). The
-    mesh's own checks go by index: two solids that touch stay apart there, not in the file."""
+def float32_joined(mesh: Mesh, nonmanifold: int = 0) -> tuple[int, int]:
+    """(joined, nonmanifold by position): the vertices that share their float32 position (what STL and 3MF store)
+    with another vertex, less the positions they take, and the edges used by more than two triangles once vertices are
+    joined by that position, as a reader that welds a file by position sees them ((0, `nonmanifold`, the mesh's own
+    count) when no two vertices share one). The mesh's own checks go by index: two solids that touch stay apart
+    there, not in the file."""
     if mesh.n_triangles == 0:
-        return 0, 0
+        return 0, nonmanifold
     key = np.ascontiguousarray(mesh.vertices.astype(np.float32)).view(np.dtype((np.void, 12))).ravel()
     _, at = np.unique(key, return_inverse=True)
     joined = mesh.n_vertices - int(at.max()) - 1
     if joined == 0:
-        return 0, 0
+        return 0, nonmanifold
     t = at.ravel()[mesh.triangles]
     t = t[distinct_corners(t)]
     return joined, int((edge_incidence(t).count > 2).sum())
+
+
+def closed_by_position(checks: MeshChecks, nonmanifold_by_position: int) -> bool:
+    """Closed by index and still closed once vertices are joined by their float32 position (float32_joined), as a
+    reader of an STL (which has no indices) joins them."""
+    return checks.closed and nonmanifold_by_position == 0
 
 
 def shell_labels(mesh: Mesh, inc: EdgeIncidence | None = None) -> tuple[int, np.ndarray]:

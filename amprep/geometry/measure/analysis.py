@@ -163,11 +163,8 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     prog("self-intersections", 0.15)
     n_si, si_examples, si_complete = self_intersections(mesh, params.intersection_examples,
                                                          prog.span(0.15, 0.35))
-    joined, joined_nonmanifold = float32_joined(mesh)
-    by_position = joined_nonmanifold if joined else checks.nonmanifold_edges
-    section = replace(mesh_section(mesh, checks, ok3d).with_extra(
-        float32_joined_vertices=joined, nonmanifold_edges_by_position=by_position,
-        closed_by_position=checks.closed and by_position == 0), defects={
+    by_position = float32_joined(mesh, checks.nonmanifold_edges)
+    section = replace(mesh_section(mesh, checks, ok3d).with_position(*by_position), defects={
         "boundary_loops": {"count": len(loops), "total_length": float(sum(loops)), "lengths": loops[:100]},
         "nonmanifold_vertices": int(len(nmv)),
         "self_intersections": {"count": n_si, "examples": si_examples.tolist(), "complete": si_complete},

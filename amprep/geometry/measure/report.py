@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from amprep.geometry.core.checks import MeshChecks
+from amprep.geometry.core.checks import MeshChecks, closed_by_position
 from amprep.geometry.core.mesh import Mesh
 
 SCHEMA = "amprep.report/1"
@@ -77,6 +77,12 @@ class MeshSection:
     def with_extra(self, **values: Any) -> MeshSection:
         """This section with more keys after the others."""
         return replace(self, extra={**(self.extra or {}), **values})
+
+    def with_position(self, joined: int, nonmanifold: int) -> MeshSection:
+        """This section with what a reader that joins vertices by float32 position sees (core.checks.float32_joined:
+        `joined` vertices, `nonmanifold` edges)."""
+        return self.with_extra(float32_joined_vertices=joined, nonmanifold_edges_by_position=nonmanifold,
+                               closed_by_position=closed_by_position(self.checks, nonmanifold))
 
     def to_json(self) -> dict[str, Any]:
         c = self.checks
