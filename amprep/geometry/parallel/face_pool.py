@@ -9,6 +9,7 @@ import multiprocessing as mp
 import os
 import sys
 from collections.abc import Callable, Sequence
+from itertools import accumulate
 from typing import Any
 
 from amprep.errors import AmprepError, ErrorCode
@@ -81,16 +82,17 @@ def map_faces(fn: Callable[[int], Any], ids: Sequence[int], ready: Callable[[], 
               workers: int | None = None) -> dict[int, Any]:
     """{i: fn(i)} for every id, taken in the order given (costliest first balances best): serially while ready() is
     False (the caller's results still depend on which process computes them), the cost left (cost[k] of ids[k];
-    every id 1 when None) is under parallel_min or the next id is DOMINANT; then this process and forked children take the rest one id at a
-    time, each with one numba thread. fn must not change shared state (a child's changes are lost). An AmprepError
+    every id 1 when None) is under parallel_min or the next id is DOMINANT; then this process and forked children
+    take the rest one id at a time, each with one numba thread. fn must not change shared state (a child's changes are lost). An AmprepError
     in a child is raised here; a child that dies or fails otherwise raises meshing_failed."""
     parallel_min = PARALLEL_MIN_COST if parallel_min is None else parallel_min
     ids = list(ids)
     left = list(cost) if cost is not None else [1.0] * len(ids)
+    after = [*accumulate(reversed(left))][::-1] + [0.0]  # after[k]: the cost of ids[k:]
     out: dict[int, Any] = {}
     k = 0
-    while k < len(ids) and (not ready() or sum(left[k:]) < parallel_min or not can_fork()
-                            or left[k] >= DOMINANT * sum(left[k + 1:])):
+    while k < len(ids) and (not ready() or after[k] < parallel_min or not can_fork()
+                            or left[k] >= DOMINANT * after[k + 1]):
         out[ids[k]] = fn(ids[k])
         k += 1
     rest = ids[k:]
