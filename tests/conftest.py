@@ -58,3 +58,14 @@ def meshed_faces(monkeypatch):
 
     monkeypatch.setattr(enforce, "mesh_face", counted)
     return started, finished
+
+
+@pytest.fixture
+def touching_step(tmp_path) -> Path:
+    """A STEP of two 10 mm boxes face to face (an assembly whose solids touch): closed by index, joined by position."""
+    import cadquery as cq
+
+    path = tmp_path / "touching.step"
+    boxes = cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), cq.Solid.makeBox(10, 10, 10, cq.Vector(10, 0, 0))])
+    cq.exporters.export(cq.Workplane().add(boxes), str(path))
+    return path

@@ -228,17 +228,12 @@ def test_reports_follow_the_json_schema(name):
     _validate(a.report)
 
 
-def test_the_report_says_what_joining_by_position_makes_of_touching_solids(tmp_path):
+def test_the_report_says_what_joining_by_position_makes_of_touching_solids(tmp_path, touching_step):
     """Two boxes of one STEP face to face: closed by index, and the report (schema-valid) says that the STL it writes
     joins into non-manifold edges; an STL read back has one vertex per position, closed either way."""
-    import cadquery as cq
-
     from amprep.geometry.io.stl import read_stl, write_stl
 
-    path = tmp_path / "touching.step"
-    boxes = cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), cq.Solid.makeBox(10, 10, 10, cq.Vector(10, 0, 0))])
-    cq.exporters.export(cq.Workplane().add(boxes), str(path))
-    a = analyze_file(path, params=AnalysisParams(bounding_box=False))
+    a = analyze_file(touching_step, params=AnalysisParams(bounding_box=False))
     m = a.report["mesh"]
     assert m["closed_by_edges"] and not m["closed_by_position"] and m["nonmanifold_edges_by_position"] > 0
     _validate(a.report)

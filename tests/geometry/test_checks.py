@@ -101,16 +101,14 @@ def test_solids_that_touch_are_apart_by_index_and_joined_in_the_file():
 
 
 
-def test_convert_notes_what_a_reader_joining_by_position_sees(tmp_path):
+def test_convert_notes_what_a_reader_joining_by_position_sees(tmp_path, touching_step):
     """Two boxes of one STEP face to face: meshed apart (closed by index, each its own B-rep edges), their shared
     face's nodes at one position; convert says what a reader that joins by position sees."""
     import cadquery as cq
 
     from amprep.jobs.convert import convert, write_result
 
-    boxes = cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), cq.Solid.makeBox(10, 10, 10, cq.Vector(10, 0, 0))])
-    path = tmp_path / "touching.step"
-    cq.exporters.export(cq.Workplane().add(boxes), str(path))
+    path = touching_step
     r = convert(path)
     assert r.checks.closed and r.checks.shells == 2
     assert any("float32 position" in n and "non-manifold" in n for n in r.notes), r.notes

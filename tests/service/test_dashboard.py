@@ -186,16 +186,11 @@ def test_refine_before_after(page, service: Service) -> None:
         page.locator("#view-main").get_attribute("data-triangles"))
 
 
-def test_convert_summary_on_the_job_page(page, service: Service, tmp_path: Path) -> None:
+def test_convert_summary_on_the_job_page(page, service: Service, touching_step: Path) -> None:
     """A convert job's page shows its summary.json: the mesh checks (closed by index, not once joined by position for
     two boxes of one STEP face to face), the meshing's tolerance and worst chordal error, and the notes."""
-    import cadquery as cq
-
-    path = tmp_path / "touching.step"
-    boxes = cq.Compound.makeCompound([cq.Solid.makeBox(10, 10, 10), cq.Solid.makeBox(10, 10, 10, cq.Vector(10, 0, 0))])
-    cq.exporters.export(cq.Workplane().add(boxes), str(path))
     with service.client() as c:
-        job = submit(c, path, "convert", '{"tolerance": 0.05}', wait=170).json()
+        job = submit(c, touching_step, "convert", '{"tolerance": 0.05}', wait=170).json()
         assert job["status"] == "succeeded", job
         art = next(a for a in job["artifacts"] if a["name"] == "summary.json")
         summary = c.get(art["url"]).json()
