@@ -122,7 +122,7 @@ def _icp(tree: cKDTree, cad_points: np.ndarray, pts: np.ndarray, R: np.ndarray, 
 
 
 def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float, stl_cloud: np.ndarray | None = None,
-          min_inliers: float = 0.6, iterations: int = 40, sample: int = 20_000,
+          cad_cloud: np.ndarray | None = None, min_inliers: float = 0.6, iterations: int = 40, sample: int = 20_000,
           rng: np.random.Generator | None = None) -> Alignment:
     """Fit (n, 3) STL points onto a dense (p, 3) cloud on the CAD surface. Starts: the 24 axis rotations about the
     bounding-box centres (STLs turned into print orientation) and the 4 matchings of principal axes about the
@@ -131,7 +131,8 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
     the fit). Every k-d tree query is bounded (10 % of the CAD's diagonal for scores, the trimming distance in
     ICP), so alignment costs seconds however far the STL starts and however large the part.
     rms and max are over the inliers (points within inlier_distance). stl_cloud: points spread evenly over the STL
-    (for the principal axes; default its vertices). Fewer than min_inliers of the points on the CAD: the STL does
+    (for the principal axes; default its vertices), cad_cloud the same on the CAD (default cad_points, which need
+    not be spread by area: a reference cloud samples slivers and edges densely). Fewer than min_inliers of the points on the CAD: the STL does
     not belong to it, AmprepError(stl_mismatch)."""
     rng = rng or np.random.default_rng(0)
     even = stl_cloud if stl_cloud is not None else stl_points
@@ -144,8 +145,9 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
     c_stl = (stl_points.min(axis=0) + stl_points.max(axis=0)) / 2
     for name, R in signed_permutations():
         starts.append((name, R, c_cad - R @ c_stl))
-    f_cad = principal_frames(cad_points)[0]
-    m_cad, m_stl = cad_points.mean(axis=0), even.mean(axis=0)
+    cad_even = cad_cloud if cad_cloud is not None else cad_points
+    f_cad = principal_frames(cad_even)[0]
+    m_cad, m_stl = cad_even.mean(axis=0), even.mean(axis=0)
     for f_stl in principal_frames(even):
         R = f_cad.T @ f_stl
         starts.append(("principal axes", R, m_cad - R @ m_stl))

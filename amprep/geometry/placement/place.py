@@ -20,6 +20,8 @@ from amprep.geometry.meshing.pipeline import mesh_model
 
 #: Gauss–Newton rounds of the fit to the exact surfaces (align.point_to_plane), each after a new projection
 POLISH_ROUNDS = 8
+#: a corner within this × the diagonal (or 8 float32 steps of its largest coordinate) of a face's surface lies on it
+SNAP = 1e-6
 #: corners farther from their face than this × the 90th percentile of the distances are left out of a round
 TRIM = 3.0
 
@@ -45,9 +47,11 @@ class PlacedStl:
 
 def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: Progress | None = None) -> PlacedStl:
     """Align an STL made elsewhere on its CAD (axis permutations, then ICP, then a fit to the exact surfaces) and
-    give each triangle its face and (u,v) by projection; stl_mismatch when it does not fit."""
+    give each triangle its face and (u,v) by projection, each apex or pole corner given the middle of its triangle's
+    other corners in its free parameter (poles.with_poles_centred); stl_mismatch when it does not fit."""
     from dataclasses import replace
 
+    from amprep.geometry.measure.poles import with_poles_centred
     from amprep.geometry.placement.align import align, point_to_plane
     from amprep.geometry.placement.project import ReferenceCloud, isolate, surface_normals
 
@@ -64,15 +68,17 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
     prog("aligning the STL on the CAD", 0.6)
     tol = max(1e-3 * diag, 0.02)
     even, _, _ = cusp.point_cloud(user.corners, 1.0, max_points=50_000)
-    fit = align(user.vertices, cloud.points, inlier_distance=tol + spacing, stl_cloud=even)
+    cad_even, _, _ = cusp.point_cloud(reference.mesh.corners, 1.0, max_points=50_000)
+    fit = align(user.vertices, cloud.points, inlier_distance=tol + spacing, stl_cloud=even, cad_cloud=cad_even)
     surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
     prog("isolating faces", 0.8)
     # the polish matches within the coarse fit's reach too: ICP on area samples of a coarse STL sits its facets, not
     # its corners, on the surface (a 0.5 mm STL of a 12 mm cone: 0.07 mm off, no corner within tol)
     reach = tol + spacing + 3 * fit.rms
+    snap = max(SNAP * diag, 8 * float(np.spacing(np.float32(np.abs(user.vertices).max()))))
     for _ in range(POLISH_ROUNDS):  # polish the fit against the exact surfaces: matched corners onto their planes
         placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
-        scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, reach)
+        scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, reach, snap)
         ok = scored.face_ids >= 0
         if ok.sum() < 3:
             break
@@ -93,7 +99,9 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
         if np.abs(dR - np.eye(3)).max() < 1e-12 and np.linalg.norm(dt) < 1e-10:
             break
     placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
-    scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol)
+    scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol, snap)
+    # one (u,v) per vertex: an apex's arbitrary u would fold its triangles' (u,v) and overstate their chordal error
+    scored = with_poles_centred(scored, np.unique(scored.face_ids[scored.face_ids >= 0]), surfaces)
     d_ok = dist[scored.face_ids >= 0]
     fit = replace(fit, rms=float(np.sqrt(np.mean(d_ok**2))) if d_ok.size else fit.rms,
                   max=float(d_ok.max()) if d_ok.size else fit.max)

@@ -8,9 +8,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface, project_points, tangents
+from amprep.geometry.core.checks import triangle_areas
 from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.core.vectors import cross
-from amprep.geometry.measure.chordal import barycentric_grid
 
 
 @dataclass(frozen=True)
@@ -22,22 +22,49 @@ class ReferenceCloud:
     uv: np.ndarray
 
     @classmethod
-    def of(cls, mesh: Mesh, spacing: float, max_order: int = 32) -> ReferenceCloud:
-        """Barycentric grids on every triangle of a tessellation that carries (u,v), of order ⌈longest edge /
-        spacing⌉ (at least 2, at most max_order), so large flat triangles are sampled as densely as small ones."""
+    def of(cls, mesh: Mesh, spacing: float, max_points: int = 4_000_000) -> ReferenceCloud:
+        """Points on every triangle of a tessellation that carries (u,v), no surface point farther than about
+        `spacing` from one (row_samples), the spacing widened when they would exceed max_points."""
         keep = np.flatnonzero(mesh.face_ids >= 0)
-        corners = mesh.corners[keep]
-        longest = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).max(axis=1)
-        order = np.clip(np.ceil(longest / spacing), 2, max_order).astype(np.int64)
-        pts, face, uv = [], [], []
-        for k in np.unique(order):
-            sel = keep[order == k]
-            w = barycentric_grid(int(k))
-            pts.append(np.einsum("pk,mkd->mpd", w, mesh.corners[sel]).reshape(-1, 3))
-            face.append(np.repeat(mesh.face_ids[sel], len(w)))
-            uv.append(np.einsum("pk,mkd->mpd", w, mesh.uv[sel]).reshape(-1, 2) if mesh.uv is not None
-                      else np.zeros((len(sel) * len(w), 2)))
-        return cls(np.concatenate(pts), np.concatenate(face), np.concatenate(uv))
+        tri, w = row_samples(mesh.corners[keep], spacing, max_points)
+        sel = keep[tri]
+        pts = np.einsum("pk,pkd->pd", w, mesh.corners[sel])
+        uv = np.einsum("pk,pkd->pd", w, mesh.uv[sel]) if mesh.uv is not None else np.zeros((len(sel), 2))
+        return cls(pts, mesh.face_ids[sel], uv)
+
+
+def row_samples(corners: np.ndarray, spacing: float, max_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """((p,) triangle, (p, 3) barycentric weights) of points on (m, 3, 3) triangles in rows parallel to each one's
+    longest edge, ⌈height / spacing⌉ rows (at least 2) and ⌈row length / spacing⌉ + 1 points a row (the apex one):
+    a sliver 300 mm long and 1 mm high gets two rows along its length, where a barycentric grid fine enough along it
+    would put (300 / spacing)² / 2 points on it. Spacing widened by √(count / max_points) while over max_points."""
+    m = len(corners)
+    edge = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)  # (m, 3): edge s is corner s → s+1
+    base = np.argmax(edge, axis=1)
+    length = edge[np.arange(m), base]
+    height = 2 * triangle_areas(corners) / np.maximum(length, 1e-300)
+    step = max(float(spacing), 1e-12)
+    for _ in range(8):
+        n_rows = np.maximum(np.ceil(height / step), 2).astype(np.int64)
+        row_tri = np.repeat(np.arange(m), n_rows + 1)
+        j = np.arange(len(row_tri)) - np.repeat(np.cumsum(n_rows + 1) - (n_rows + 1), n_rows + 1)
+        f = j / n_rows[row_tri]  # 0 on the longest edge, 1 at the apex
+        per_row = np.where(f < 1, np.ceil((1 - f) * length[row_tri] / step).astype(np.int64) + 1, 1)
+        total = int(per_row.sum())
+        if total <= max_points:
+            break
+        step *= np.sqrt(total / max_points)
+    row = np.repeat(np.arange(len(row_tri)), per_row)
+    i = np.arange(total) - np.repeat(np.cumsum(per_row) - per_row, per_row)
+    g = i / np.maximum(per_row[row] - 1, 1)
+    fr = f[row]
+    w = np.zeros((total, 3))
+    tri = row_tri[row]
+    a = base[tri]  # the longest edge runs corner a → a + 1; the apex is a + 2
+    w[np.arange(total), a] = (1 - fr) * (1 - g)
+    w[np.arange(total), (a + 1) % 3] = (1 - fr) * g
+    w[np.arange(total), (a + 2) % 3] = fr
+    return tri, w
 
 
 def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
@@ -87,29 +114,47 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
     return uv, dist
 
 
-#: a triangle whose centroid lies within this × its longest edge of its face's surface is not tried on other faces:
-#: the faces that pass as near are the same surface (a B-spline continuing a cylinder), one triangle's sag apart
+def nearest_faces(cloud: ReferenceCloud, corners: np.ndarray, k: int) -> np.ndarray:
+    """(m, 4·⌈k/4⌉) faces of the cloud's samples nearest each triangle's centroid and edge midpoints ((m, 3, 3)
+    corners), ⌈k/4⌉ for each point, nearest first: a long strip's centroid lies by the face it borders, whose samples
+    can be all those nearest it, while its own face's lie nearest its other edge."""
+    mids = 0.5 * (corners + np.roll(corners, -1, axis=1))
+    points = np.concatenate([corners.mean(axis=1, keepdims=True), mids], axis=1)  # (m, 4, 3)
+    each = -(-k // points.shape[1])
+    dist, near = cKDTree(cloud.points).query(points.reshape(-1, 3), k=each)
+    dist, near = dist.reshape(len(corners), -1), near.reshape(len(corners), -1)
+    order = np.argsort(dist, axis=1, kind="stable")
+    return cloud.face[np.take_along_axis(near, order, axis=1)]
+
+
+#: a triangle whose face passes through its corners and within this × its smallest height of its centroid is not
+#: tried on other faces: the faces that pass as near are the same surface (a B-spline continuing a cylinder), one
+#: triangle's sag apart (its height, not its length: a strip 300 mm long and 2 mm wide on a cylinder sags by its width)
 ON_SURFACE = 0.02
 
 
 def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], faces: tuple[FaceInfo, ...],
-            tolerance: float, candidates: int = 6) -> tuple[Mesh, np.ndarray]:
+            tolerance: float, snap: float = 0.0, candidates: int = 6) -> tuple[Mesh, np.ndarray]:
     """Give each triangle of a (CAD-frame) mesh the CAD face it tessellates: the faces of the samples nearest its
-    centroid are tried in order, the corners and centroid projected on each face's surface, and of the faces with
-    every corner within `tolerance` of their surface the one nearest the centroid is kept (else face −1): corners
-    alone do not tell a disc's triangle, its corners on the rim, from the cone or cylinder through that rim; the
-    search stops at a face whose surface passes within ON_SURFACE × the longest edge of the centroid. Returns the mesh with
-    face_ids, uv and faces, and (m, 3) corner distances to the chosen face's surface."""
+    centroid and edge midpoints are tried in order, the corners and centroid projected on each face's surface; of the
+    faces with every corner within `tolerance` of their surface, one through all three corners (within `snap`: a
+    tessellation's corners lie on its face) is preferred, and among equals the one nearest the centroid, else the one
+    the triangle strays from least (the largest distance of its corners and centroid); no such face: −1. The corners
+    alone do not tell a disc's triangle, its corners on the rim, from the cone or cylinder through that rim (the
+    centroid does); the centroid alone gives a fillet's triangle to the plane it is tangent to, whose untrimmed surface
+    passes nearer the centroid than the triangle's own sag while its far corner lies off that plane. The search stops
+    at a face through the corners whose surface passes within ON_SURFACE × the triangle's smallest height of the
+    centroid. Returns the mesh with face_ids, uv and faces, and (m, 3) corner distances to the chosen face's surface."""
     corners = mesh.corners
     m = len(corners)
     points = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)  # (m, 4, 3)
-    _, near = cKDTree(cloud.points).query(points[:, 3], k=8 * candidates)
-    near_faces = cloud.face[near]  # (m, k) faces of the nearest samples, nearest first
+    near_faces = nearest_faces(cloud, corners, 8 * candidates)
     face_ids = np.full(m, -1, np.int32)
     uv = np.zeros((m, 3, 2))
     dist = np.full((m, 3), np.inf)
-    centre = np.full(m, np.inf)  # the centroid's distance to the chosen face's surface
-    enough = ON_SURFACE * np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    rank = np.full((m, 2), np.inf)  # of the chosen face: (0 through the corners else 1, centroid's distance or stray)
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    enough = ON_SURFACE * 2 * triangle_areas(corners) / np.maximum(longest, 1e-300)  # × its smallest height
     trees: dict[int, tuple[np.ndarray, cKDTree]] = {}
     todo = np.arange(m)
     tried = np.full((m, 1), -2, np.int64)
@@ -127,12 +172,16 @@ def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], fac
         tried = np.concatenate([tried, np.full((m, 1), -2, np.int64)], axis=1)
         tried[todo, -1] = pick
         p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, trees)
-        fits = (d[:, :3] <= tolerance).all(axis=1) & (d[:, 3] < centre[todo])
+        through = d[:, :3].max(axis=1) <= snap
+        new = np.stack([np.where(through, 0.0, 1.0), np.where(through, d[:, 3], d.max(axis=1))], axis=1)
+        old = rank[todo]
+        better = (new[:, 0] < old[:, 0]) | ((new[:, 0] == old[:, 0]) & (new[:, 1] < old[:, 1]))
+        fits = (d[:, :3] <= tolerance).all(axis=1) & better
         closer = (face_ids[todo] < 0) & (d[:, :3].max(axis=1) < dist[todo].max(axis=1))  # unmatched: the nearest
         take = fits | closer
         uv[todo[take]], dist[todo[take]] = p_uv[take, :3], d[take, :3]
-        face_ids[todo[fits]], centre[todo[fits]] = pick[fits], d[fits, 3]
-        todo = todo[~(centre[todo] <= enough[todo])]
+        face_ids[todo[fits]], rank[todo[fits]] = pick[fits], new[fits]
+        todo = todo[~((rank[todo, 0] == 0) & (rank[todo, 1] <= enough[todo]))]
     out = Mesh(mesh.vertices, mesh.triangles, face_ids, uv=uv,
                faces=tuple(FaceInfo(f.id, f.surface_type, f.solid, "stl") for f in faces))
     return out, dist

@@ -20,7 +20,7 @@ from amprep.geometry.measure.analysis import AnalysisParams, face_chordal_errors
 from amprep.geometry.measure.report import FaceScore, Issue, MeshSection, Stats, mesh_section, stats_json
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
-from amprep.geometry.refine.adaptive import adaptive_refine, with_poles_centred
+from amprep.geometry.refine.adaptive import adaptive_refine
 from amprep.geometry.refine.face_domain import FaceDomains
 from amprep.geometry.refine.sma import Ratios, Refinement, sma_output_size, sma_refine
 from amprep.geometry.refine.vta import vta_refine
@@ -148,8 +148,6 @@ def predicted_size(method: str, mesh: Mesh, faces: np.ndarray, iterations: int) 
 def refine_faces(method: str, mesh: Mesh, faces: np.ndarray, surfaces: dict[int, Surface], params: RefineParams,
             iterations: int, curves: EdgeCurves | None = None, target: float | None = None,
             domain: FaceDomains | None = None) -> Refinement:
-    if method != "adaptive" and mesh.vertex_dim is None:  # a user's STL: one (u,v) per apex (adaptive centres its own)
-        mesh = with_poles_centred(mesh, faces, surfaces)
     if method == "sma":
         return sma_refine(mesh, faces, surfaces, Ratios.parse(params.ratios))
     if method == "adaptive":
