@@ -20,6 +20,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from amprep.errors import AmprepError  # noqa: E402
 from amprep.geometry.cad.read import read_cad  # noqa: E402
 from amprep.geometry.cad.surfaces import surface_of  # noqa: E402
 from amprep.geometry.io.stl import read_stl, write_stl  # noqa: E402
@@ -41,12 +42,16 @@ def cell(model, surfaces: dict, tol: float, source: str, folder: Path) -> dict:
     stl = folder / "user.stl"
     write_stl(made, stl)
     t = time.perf_counter()
-    placed = place_user_stl(model, read_stl(stl), MeshParams(tolerance=tol))
+    base = {"triangles": made.n_triangles, "made": float(np.nanmax(own))}
+    try:
+        placed = place_user_stl(model, read_stl(stl), MeshParams(tolerance=tol))
+    except AmprepError as err:  # an STL off its CAD (OCCT's hull is 118 mm off at 0.34 mm) is refused, not scored
+        return base | {"error": err.code.value, "seconds": time.perf_counter() - t}
     seconds = time.perf_counter() - t
     got = face_chordal_errors(placed.mesh, placed.surfaces, ORDER)
-    kinds = np.array([f.surface_type for f in model.faces] + ["none"])
+    kinds = np.array([f.surface_type for f in made.faces] + ["none"])  # face id −1 (unmatched): the last
     worse = (got > own + 1e-3 * tol) & (kinds[placed.mesh.face_ids] != kinds[made.face_ids])
-    return {"triangles": made.n_triangles, "made": float(np.nanmax(own)), "reported": float(np.nanmax(got)),
+    return base | {"reported": float(np.nanmax(got)),
             "misplaced": int(worse.sum()), "unmatched": placed.unmatched, "fit_max": placed.fit.max,
             "seconds": seconds}
 
@@ -85,6 +90,10 @@ def write(rows: list[dict], name: str, argv: str) -> None:
              "unmatched | fit max mm | place s |",
              "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['part']} | {r['tol']:g} | {r['source']} | {r['triangles']:,} | {r['made']:.4g} | "
+                         f"refused: `{r['error']}` | | | | | {r['seconds']:.1f} |")
+            continue
         ratio = r["reported"] / r["made"] if r["made"] > 0 else float("nan")
         lines.append(f"| {r['part']} | {r['tol']:g} | {r['source']} | {r['triangles']:,} | {r['made']:.4g} | "
                      f"{r['reported']:.4g} | {ratio:.3f} | {r['misplaced']} | {r['unmatched']} | {r['fit_max']:.2g} | "

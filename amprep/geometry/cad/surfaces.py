@@ -73,11 +73,20 @@ def tangents(surface: Surface, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return su, sv
 
 
-def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12) -> tuple[np.ndarray, np.ndarray]:
+def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12,
+                   within: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Newton on |S(u,v) − p|² from uv0, all points at once, derivatives by central differences:
-    ((n, 2) (u,v), (n,) distance |S(u,v) − p|)."""
+    ((n, 2) (u,v), (n,) distance |S(u,v) − p|). within: each non-periodic parameter kept in the face's bounds (points
+    of the face lie there; a closed B-spline's far half, or its extrapolation past the knots, is another face's)."""
     uv = np.array(uv0, dtype=float)
     span = uv_extent(surface)
+    lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
+    if within and surface.bounds is not None:
+        u1, u2, v1, v2 = surface.bounds
+        for k, (a, b) in enumerate(((u1, u2), (v1, v2))):
+            if not surface.periods[k] and np.isfinite(a) and np.isfinite(b):
+                lo[k], hi[k] = a - 1e-9 * span[k], b + 1e-9 * span[k]
+    uv = np.clip(uv, lo, hi)
     for _ in range(iterations):
         s = surface.evaluate(uv)
         su, sv = tangents(surface, uv)
@@ -90,7 +99,7 @@ def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterat
         dv = np.where(ok, -(a * gv - b * gu) / np.where(ok, det, 1), 0.0)
         step = np.stack([du, dv], 1)
         limit = 0.25 * span  # no jumps across the domain from a bad start
-        uv = uv + np.clip(step, -limit, limit)
+        uv = np.clip(uv + np.clip(step, -limit, limit), lo, hi)
         if np.abs(step / span).max(initial=0) < 1e-12:
             break
     return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1)

@@ -48,10 +48,10 @@ class PlacedStl:
 def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: Progress | None = None) -> PlacedStl:
     """Align an STL made elsewhere on its CAD (axis permutations, then ICP, then a fit to the exact surfaces) and
     give each triangle its face and (u,v) by projection, each apex or pole corner given the middle of its triangle's
-    other corners in its free parameter (poles.with_poles_centred); stl_mismatch when it does not fit."""
+    other corners in its free parameter (poles.with_free_corners_centred); stl_mismatch when it does not fit."""
     from dataclasses import replace
 
-    from amprep.geometry.measure.poles import with_poles_centred
+    from amprep.geometry.measure.poles import with_free_corners_centred
     from amprep.geometry.placement.align import align, point_to_plane
     from amprep.geometry.placement.project import ReferenceCloud, isolate, surface_normals
 
@@ -100,8 +100,8 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
             break
     placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
     scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol, snap)
-    # one (u,v) per vertex: an apex's arbitrary u would fold its triangles' (u,v) and overstate their chordal error
-    scored = with_poles_centred(scored, np.unique(scored.face_ids[scored.face_ids >= 0]), surfaces)
+    # a pole's free parameter, wherever its projection left it, would fold its triangles' (u,v)
+    scored = with_free_corners_centred(scored, surfaces, snap)
     d_ok = dist[scored.face_ids >= 0]
     fit = replace(fit, rms=float(np.sqrt(np.mean(d_ok**2))) if d_ok.size else fit.rms,
                   max=float(d_ok.max()) if d_ok.size else fit.max)

@@ -108,7 +108,7 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
         tris = np.flatnonzero(face == fid)
         pts = points[tris].reshape(-1, 3)
         _, near = tree.query(pts)  # start each point at the nearest sample of the same face
-        p_uv, d = project_points(surf, pts, cloud.uv[own[near]])
+        p_uv, d = project_points(surf, pts, cloud.uv[own[near]], within=True)
         uv[tris] = unwrap_corners(p_uv.reshape(-1, k, 2), surf.periods)
         dist[tris] = d.reshape(-1, k)
     return uv, dist
