@@ -22,6 +22,9 @@ from amprep.geometry.meshing.pipeline import mesh_model
 POLISH_ROUNDS = 8
 #: a corner within this × the diagonal (or 8 float32 steps of its largest coordinate) of a face's surface lies on it
 SNAP = 1e-6
+#: the polish stops at a round that moves no corner by more than this × the diagonal (later rounds on CTC-02's
+#: B-spline twin moved them by 1e-10 mm, each at 7 s)
+SETTLED = 1e-9
 #: corners farther from their face than this × the 90th percentile of the distances are left out of a round
 TRIM = 3.0
 
@@ -96,8 +99,9 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
         dR, dt = point_to_plane(src[near], tgt[near], normals[near],  # weighted by area, like the surface
                                 np.repeat(area, 3)[near] + 1e-12)
         fit = replace(fit, rotation=dR @ fit.rotation, translation=dR @ fit.translation + dt)
-        if np.abs(dR - np.eye(3)).max() < 1e-12 and np.linalg.norm(dt) < 1e-10:
-            break
+        turn = 3 * np.abs(dR - np.eye(3)).max() * float(np.abs(placed.vertices).max())  # bounds |(dR − I)·x|
+        if turn + np.linalg.norm(dt) <= SETTLED * diag:
+            break  # no corner moved by more than that: the rounds after it move them by rounding noise
     placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
     scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol, snap)
     # a pole's free parameter, wherever its projection left it, would fold its triangles' (u,v)
