@@ -263,8 +263,7 @@ def test_adaptive_splits_edges_to_a_pole_along_them(reference_solids, name, occt
     pole to two points of one ruling (a flat triangle once made on the cone), and no round folds the (u,v) near it.
     Longest-edge splitting (by_sagitta off) splits edges to the pole all the time."""
     from amprep.geometry.cad.edge_curves import EdgeCurves
-    from amprep.geometry.measure.poles import pole_vertices
-    from amprep.geometry.refine.adaptive import adaptive_refine
+    from amprep.geometry.refine.adaptive import adaptive_refine, pole_vertices
 
     model = model_from_shape(reference_solids[name])
     mesh = mesh_model(model, MeshParams(tolerance=0.2, occt_edges=occt_edges)).mesh

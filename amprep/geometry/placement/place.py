@@ -51,12 +51,11 @@ class PlacedStl:
 def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: Progress | None = None) -> PlacedStl:
     """Align an STL made elsewhere on its CAD (axis permutations, then ICP, then a fit to the exact surfaces) and
     give each triangle its face and (u,v) by projection, each apex or pole corner given the middle of its triangle's
-    other corners in its free parameter (poles.with_free_corners_centred); stl_mismatch when it does not fit."""
+    other corners in its free parameter (project.with_free_corners_centred); stl_mismatch when it does not fit."""
     from dataclasses import replace
 
-    from amprep.geometry.measure.poles import with_free_corners_centred
     from amprep.geometry.placement.align import align, point_to_plane
-    from amprep.geometry.placement.project import ReferenceCloud, isolate, surface_normals
+    from amprep.geometry.placement.project import ReferenceCloud, isolate, surface_normals, with_free_corners_centred
 
     prog = prog or Progress(None)
     diag = float(np.linalg.norm(np.ptp(user.vertices, axis=0)))

@@ -90,6 +90,28 @@ def unwrap_corners(uv: np.ndarray, periods: tuple[float | None, float | None]) -
     return out
 
 
+def with_free_corners_centred(mesh: Mesh, surfaces: dict[int, Surface], snap: float) -> Mesh:
+    """The mesh with each corner that can take the middle of its triangle's other two corners in u (or in v) while
+    its surface point moves by at most `snap` given that middle: at a pole or apex one parameter is free, and a user's
+    STL, whose corners are projected one triangle at a time, gets there whatever value its projection ended at (an
+    arbitrary u, or the far side of a closed B-spline's seam), so its (u,v) triangle spans the domain."""
+    if mesh.uv is None:
+        return mesh
+    uv = mesh.uv.copy()
+    for fid in np.unique(mesh.face_ids[mesh.face_ids >= 0]):
+        t = np.flatnonzero(mesh.face_ids == fid)
+        surf = surfaces[int(fid)]
+        here = surf.evaluate(uv[t].reshape(-1, 2)).reshape(-1, 3, 3)
+        for k in (0, 1):
+            alt = uv[t].copy()
+            alt[:, :, k] = 0.5 * (np.roll(uv[t][:, :, k], -1, axis=1) + np.roll(uv[t][:, :, k], 1, axis=1))
+            moved = np.linalg.norm(surf.evaluate(alt.reshape(-1, 2)).reshape(-1, 3, 3) - here, axis=2)
+            free = moved <= snap
+            r, c = np.nonzero(free)
+            uv[t[r], c, k] = alt[r, c, k]
+    return mesh.with_arrays(uv=uv)
+
+
 def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
                    trees: dict[int, tuple[np.ndarray, cKDTree]]) -> tuple[np.ndarray, np.ndarray]:
     """((m, k, 2) uv, (m, k) distance) of each triangle's k points (m, k, 3) (its corners, then its centroid)

@@ -10,11 +10,10 @@ import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.edge_curves import EdgeCurves
-from amprep.geometry.cad.surfaces import Surface, nearest_copy
+from amprep.geometry.cad.surfaces import Surface, nearest_copy, tangents
 from amprep.geometry.core.edges import edge_codes, face_edge_table
-from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, Mesh
+from amprep.geometry.core.mesh import IN_FACE, NO_TOPOLOGY, ON_BREP_EDGE, ON_BREP_VERTEX, Mesh
 from amprep.geometry.measure.chordal import triangle_chordal_error
-from amprep.geometry.measure.poles import PoleCorners, centre_poles, pole_corners, pole_vertices, vertex_keys
 from amprep.geometry.refine.face_domain import FaceDomains
 from amprep.geometry.refine.sma import Refinement
 
@@ -30,8 +29,76 @@ def _errors(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarr
     return err
 
 
+def pole_vertices(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarray, vdim: np.ndarray,
+                  surfaces: dict[int, Surface], faces: np.ndarray) -> dict[tuple[int, int], int]:
+    """{(vertex, face): free (u,v) coordinate} of the poles among the B-rep vertices of `faces` (any vertex of a mesh
+    with no B-rep topology: a user's STL placed on its CAD): a vertex whose corners in the face differ in one
+    coordinate only, and whose surface point halfway between two of them is the vertex itself (a cone's apex, a
+    sphere's pole; on a seam the point halfway is elsewhere)."""
+    r, c = np.nonzero(np.isin(vdim[tris], (ON_BREP_VERTEX, NO_TOPOLOGY)) & np.isin(fids, faces)[:, None])
+    if not len(r):
+        return {}
+    key = tris[r, c].astype(np.int64) * (int(fids.max()) + 1) + fids[r]  # one group per (vertex, face)
+    order = np.argsort(key, kind="stable")
+    start = np.flatnonzero(np.r_[True, np.diff(key[order]) != 0])
+    uv = uvs[r, c][order]
+    lo, hi = np.minimum.reduceat(uv, start, axis=0), np.maximum.reduceat(uv, start, axis=0)
+    one_way = ((hi - lo) > 1e-9).sum(axis=1) == 1
+    v, f = tris[r, c][order][start][one_way], fids[r][order][start][one_way]
+    half = np.empty((len(v), 3))
+    for face in np.unique(f):
+        sel = f == face
+        half[sel] = surfaces[int(face)].evaluate(0.5 * (lo + hi)[one_way][sel])
+    at_vertex = np.linalg.norm(half - verts[v], axis=1) <= 1e-6 * (1.0 + np.abs(verts[v]).max(axis=1))
+    free = np.argmax((hi - lo)[one_way], axis=1)
+    found = {(int(a), int(b)): int(k) for a, b, k in zip(v[at_vertex], f[at_vertex], free[at_vertex], strict=True)}
+    same = ((hi - lo) > 1e-9).sum(axis=1) == 0  # one (u,v) in every corner (a projected STL vertex): S_u or S_v ≈ 0
+    v, f = tris[r, c][order][start][same], fids[r][order][start][same]
+    for face in np.unique(f):
+        sel = np.flatnonzero(f == face)
+        free = _degenerate_direction(surfaces[int(face)], lo[same][sel])
+        found.update(((int(v[i]), int(face)), int(k)) for i, k in zip(sel[free >= 0], free[free >= 0], strict=True))
+    return found
+
+
+def _degenerate_direction(surface: Surface, uv: np.ndarray) -> np.ndarray:
+    """(n,) 0 where S_u ≈ 0 at (n, 2) uv (u free: an apex, a pole), 1 where S_v ≈ 0, −1 elsewhere (surfaces.tangents),
+    ≈ 0 meaning under 1e-6 of the other direction's."""
+    su, sv = (np.linalg.norm(t, axis=1) for t in tangents(surface, uv))
+    return np.where(su <= 1e-6 * sv, 0, np.where(sv <= 1e-6 * su, 1, -1))
+
+
+PoleCorners = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def _pole_corners(tris: np.ndarray, fids: np.ndarray, poles: dict[tuple[int, int], int],
+                  n_faces: int) -> PoleCorners:
+    """(rows, cols, free coordinate) of the triangle corners that are poles of their triangle's face."""
+    if not poles:
+        empty = np.zeros(0, np.int64)
+        return empty, empty, empty
+    keys = np.array([v * n_faces + f for v, f in poles], np.int64)
+    free = np.array(list(poles.values()), np.int64)
+    order = np.argsort(keys)
+    keys, free = keys[order], free[order]
+    corner = tris.astype(np.int64) * n_faces + fids[:, None]
+    at = np.minimum(np.searchsorted(keys, corner), len(keys) - 1)
+    r, c = np.nonzero(keys[at] == corner)
+    return r, c, free[at[r, c]]
+
+
+def _centre_poles(uvs: np.ndarray, pole: PoleCorners) -> np.ndarray:
+    """(m, 3, 2) the corners' (u,v) with each pole corner (`pole`: _pole_corners) given, in its free coordinate, the
+    mean of the triangle's two other corners' (where the triangle leaves the pole), so the (u,v) triangle maps onto
+    the 3D one without a fold."""
+    out = uvs.copy()
+    r, c, k = pole
+    out[r, c, k] = 0.5 * (uvs[r, (c + 1) % 3, k] + uvs[r, (c + 2) % 3, k])
+    return out
+
+
 def _mid_uv(uvs: np.ndarray, pole: PoleCorners) -> np.ndarray:
-    """(m, 3, 2) (u,v) midpoint of each edge (corner s → s+1); at a pole corner (`pole`: pole_corners), its free
+    """(m, 3, 2) (u,v) midpoint of each edge (corner s → s+1); at a pole corner (`pole`: _pole_corners), its free
     coordinate is taken from the edge's other end, so the midpoint lies on the line from that end to the pole (a
     cone's ruling, a sphere's meridian) instead of wherever the pole's corner happens to sit."""
     ends = uvs.copy()
@@ -104,7 +171,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         raise AmprepError(ErrorCode.INVALID_PARAMETER, "the adaptive target must be > 0")
     faces = np.unique(np.asarray(faces, dtype=np.int64))
     verts, tris, fids, uvs = mesh.vertices, mesh.triangles, mesh.face_ids, mesh.uv
-    vdim, vent, vpar = vertex_keys(mesh)
+    vdim, vent, vpar = _vertex_keys(mesh)
     parent = np.arange(mesh.n_triangles)
     chosen = np.isin(fids, faces)
     unsplittable: set[tuple[int, int]] = set()  # contour edges with no B-rep edge behind them, or whose pcurves miss it
@@ -113,8 +180,8 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     poles = pole_vertices(verts, tris, uvs, fids, vdim, surfaces, faces)
     n_faces = int(fids.max()) + 1 if len(fids) else 1
     for _ in range(max_rounds):
-        pole = pole_corners(tris, fids, poles, n_faces)  # the same triangles until this round's bisection
-        uvs = centre_poles(uvs, pole)
+        pole = _pole_corners(tris, fids, poles, n_faces)  # the same triangles until this round's bisection
+        uvs = _centre_poles(uvs, pole)
         current = Mesh(verts, tris, fids, None, vdim, vent, vpar)
         err = _errors(verts, tris, uvs, fids, faces, surfaces, order)
         edge_id, inner = face_edge_table(current)
@@ -161,7 +228,7 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         vdim, vent, vpar = np.concatenate([vdim, new_dim]), np.concatenate([vent, new_ent]), np.concatenate([vpar, new_par])
         tris, uvs, src = _bisect(tris, uvs, vid, mid_uv, cand, n_split)
         fids, chosen, parent = fids[src], chosen[src], parent[src]
-    uvs = centre_poles(uvs, pole_corners(tris, fids, poles, n_faces))
+    uvs = _centre_poles(uvs, _pole_corners(tris, fids, poles, n_faces))
     order_ = np.argsort(parent, kind="stable")
     refined = Mesh(verts, tris[order_], fids[order_], uvs[order_], vdim if mesh.vertex_dim is not None else None,
                    vent if mesh.vertex_entity is not None else None, vpar if mesh.vertex_param is not None else None,
@@ -208,6 +275,13 @@ def _leaving(domain: FaceDomains | None, split: np.ndarray, edge_id: np.ndarray,
         k = fids[r] == f
         off[k] = ~domain.inside(int(f), own_mid[r[k], c[k]], surfaces[int(f)].periods)
     return set(sides[r[off], c[off]].tolist())
+
+
+def _vertex_keys(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(dim, entity, param) (n,) of every vertex: the mesh's own, or −1, −1, nan where it has none."""
+    return (mesh.vertex_dim if mesh.vertex_dim is not None else np.full(mesh.n_vertices, -1, np.int8),
+            mesh.vertex_entity if mesh.vertex_entity is not None else np.full(mesh.n_vertices, -1, np.int32),
+            mesh.vertex_param if mesh.vertex_param is not None else np.full(mesh.n_vertices, np.nan))
 
 
 def _resolve_contours(curves: EdgeCurves, current: Mesh, contour_slots: np.ndarray, edge_id: np.ndarray, n_edges: int,
