@@ -60,6 +60,66 @@ def meshed_faces(monkeypatch):
     return started, finished
 
 
+def faces_of(shape):
+    """The faces of an OCCT shape, in explorer order."""
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    exp = TopExp_Explorer(shape, TopAbs_FACE)
+    while exp.More():
+        yield TopoDS.Face_s(exp.Current())
+        exp.Next()
+
+
+def regrown(shape, delta: float, which):
+    """The shape with the radius of every cylindrical face `which(gp_Cylinder)` accepts grown by delta, its edges and
+    their pcurves kept: those faces miss the edges they share with their neighbours."""
+    from OCP.BRep import BRep_Builder, BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.Geom import Geom_CylindricalSurface
+    from OCP.GeomAbs import GeomAbs_Cylinder
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS
+
+    builder = BRep_Builder()
+    for face in list(faces_of(shape)):
+        ad = BRepAdaptor_Surface(face)
+        if ad.GetType() != GeomAbs_Cylinder or not which(ad.Cylinder()):
+            continue
+        grown = Geom_CylindricalSurface(ad.Cylinder().Position(), ad.Cylinder().Radius() + delta)
+        kept = []
+        exp = TopExp_Explorer(face, TopAbs_EDGE)
+        while exp.More():
+            edge = TopoDS.Edge_s(exp.Current())
+            c1 = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+            c2 = (BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(edge.Reversed()), face, 0.0, 0.0)
+                  if BRep_Tool.IsClosed_s(edge, face) else None)
+            kept.append((edge, c1, c2))
+            exp.Next()
+        builder.UpdateFace(face, grown, TopLoc_Location(), 2 * delta)
+        for edge, c1, c2 in kept:
+            if c2 is None:
+                builder.UpdateEdge(edge, c1, grown, TopLoc_Location(), 2 * delta)
+            else:
+                first, second = (c1, c2) if edge.Orientation() == TopAbs_FORWARD else (c2, c1)
+                builder.UpdateEdge(edge, first, second, grown, TopLoc_Location(), 2 * delta)
+    assert BRepCheck_Analyzer(shape).IsValid()
+    return shape
+
+
+def filleted_box(delta: float):
+    """A 20 × 20 × 10 box, its vertical edges rounded at r 3, one round's radius grown by delta: tangent to its two
+    planes, it misses them by delta across its edges and meets them only ~√(2·3·delta) away."""
+    import cadquery as cq
+
+    shape = cq.Workplane().box(20, 20, 10).edges("|Z").fillet(3).val().wrapped
+    return regrown(shape, delta, lambda c: c.Location().X() > 0 and c.Location().Y() > 0)
+
+
 @pytest.fixture
 def touching_step(tmp_path) -> Path:
     """A STEP of two 10 mm boxes face to face (an assembly whose solids touch): closed by index, joined by position."""

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from amprep.geometry.io.stl import read_stl, write_stl
-from tests.conftest import corpus
+from tests.conftest import corpus, filleted_box
 
 from .browser import (
     ARGS,
@@ -206,6 +206,25 @@ def test_convert_summary_on_the_job_page(page, service: Service, touching_step: 
     assert float(cell("max chordal error (mm)")) <= 0.05 and cell("within tolerance") == "true"
     notes = page.locator("#report li").all_inner_texts()
     assert any("float32 position" in n for n in notes) and notes == summary["notes"]
+
+
+def test_brep_gap_on_the_job_page(page, service: Service, tmp_path: Path) -> None:
+    """A part whose round misses its planes by 30 µm, converted at 10 µm: the page says it is not within tolerance,
+    by how much its faces miss their edges, and why (the note)."""
+    from OCP.BRepTools import BRepTools
+
+    path = tmp_path / "gapped.brep"
+    BRepTools.Write_s(filleted_box(0.03), str(path))
+    with service.client() as c:
+        job = submit(c, path, "convert", '{"tolerance": 0.01}', wait=170).json()
+        assert job["status"] == "succeeded", job
+    page.goto(f"{service.url}/jobs/{job['id']}")
+    page.locator("#report h3", has_text="Meshing").wait_for()
+    row = page.locator("#report tr", has=page.locator("th", has_text="faces miss their shared edges")).first
+    assert float(row.locator("td").inner_text()) == pytest.approx(0.015, rel=0.2)
+    within = page.locator("#report tr", has=page.locator("th", has_text="within tolerance")).first
+    assert within.locator("td").inner_text() == "false"
+    assert any("miss their shared edges" in n for n in page.locator("#report li").all_inner_texts())
 
 
 def test_form_from_definitions(page, service: Service) -> None:

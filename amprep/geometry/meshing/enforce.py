@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from amprep.geometry.meshing.shared_edges import (
     split_edge_to_tolerance,
 )
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING
+from amprep.geometry.meshing.weld import Seating, seat_boundaries
 from amprep.geometry.parallel.face_pool import SharedCount, map_faces
 
 ENFORCE_ROUNDS = 4
@@ -60,6 +61,9 @@ REMESH_PER_FACE = 100
 #: BRepMesh collapses a circle under its minimum size onto its vertex (KiCad's DSUB-15: a pin's 0.05 mm end disc at
 #: 0.1 mm, left with no triangles and reported unmeshed)
 CLOSED_EDGE_SEGMENTS = 3
+#: a face or edge the B-rep's gap g leaves its boundary off its surface (weld.seat_boundaries) is meshed to the target less g, to no
+#: less than this × the target: a gap near the tolerance is reported, not chased into ever smaller triangles
+GAP_FLOOR = 0.25
 
 
 @dataclass
@@ -82,6 +86,8 @@ class FaceStates:
     estimated: int = 0  # the quality mesher's estimate, once made (_estimate)
     compiled: bool = False  # its faces meshed with the compiled kernels, as that estimate decided (_estimate)
     expected: dict[int, float] = field(default_factory=dict)  # that estimate per face, meshed once (_estimate)
+    seating: Seating = field(default_factory=Seating)  # the B-rep's gaps at the faces' boundaries (weld.seat_boundaries)
+    tight: set[int] = field(default_factory=set)  # faces found over the tolerance: re-meshed to less_gap from then on
 
     def __post_init__(self) -> None:
         self.errors = [np.zeros(0)] * len(self.patches)
@@ -101,7 +107,10 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
         stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
         stage("re-meshing faces", 0.0)
         _remesh(f, todo)
+        seating = seat_boundaries(f.patches, f.surfaces, f.topo.vertex_roots(), f.tol)
+        f.seating.add_gaps(seating)
         _measure(f, round_, todo, first_error, stage)
+        _measure_moved(f, seating.moved)
         if not f.params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
             break
         over = [i for i in range(len(f.patches)) if f.patches[i] is not None and len(f.errors[i])
@@ -109,6 +118,7 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
                 and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
         if not over:
             break
+        f.tight.update(over)
         todo = _split_edges(f, over)
         _mend(f, over, todo)
         for i in todo.union(over):
@@ -121,20 +131,14 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     points of their old mesh); every edge is discretised first, before faces are meshed apart from each other."""
     target = f.tol * ENFORCE_MARGIN
     remesh = sorted(i for i in todo if f.surfaces[i] is not None)  # the lattices plan in face order
-    redone = set(remesh)
-    kept = sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches) if p is not None and i not in redone)
     for i in remesh:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
     if f.params.quality:
-        faces = [f.model.faces[i] for i in remesh]
-        collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
-        grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
-        loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
-        planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
-                                target, f.params.angular, f.params.max_triangles)
-        f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
-        if not f.estimated:
-            f.compiled = _estimate(f, remesh, loops, planned, kept)
+        remesh, loops, planned = _plan_quality(f, remesh, target)
+    redone = set(remesh)
+    kept = sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches) if p is not None and i not in redone)
+    if f.params.quality and not f.estimated:
+        f.compiled = _estimate(f, remesh, loops, planned, kept)
 
     limit = f.params.max_triangles
     made = SharedCount(kept)
@@ -149,6 +153,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
 
     def mesh_one(i: int) -> FacePatch | None:
         old = f.patches[i]
+        face_target = less_gap(target, f.seating.face_gap.get(i, 0.0)) if i in f.tight else target
         seeds = None
         if old is not None and old.uv is not None:
             seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
@@ -156,10 +161,10 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
             if i in f.lattice:
                 face = f.model.faces[i]
                 lattice = mesh_lattice(i, face, boundary_loops(face, f.topo, target, f.params.angular),
-                                       f.surfaces[i], f.lattice[i], target, f.params.check_order)  # type: ignore[arg-type]
+                                       f.surfaces[i], f.lattice[i], face_target, f.params.check_order)  # type: ignore[arg-type]
                 if lattice is not None:
                     return lattice
-            return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
+            return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], face_target,  # type: ignore[arg-type]
                              f.params.angular, f.params.check_order, seeds, f.min_area, quality=f.params.quality)
         except AmprepError as exc:
             if exc.code != ErrorCode.MESHING_FAILED:  # a cancel seen at a checkpoint stops the job, not the face
@@ -174,6 +179,37 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         f.patches[i] = patch
         if patch is None:
             f.unmeshed.append(i)
+
+
+def less_gap(target: float, gap: float) -> float:
+    """The target a face or edge is meshed to where the B-rep's gap (mm) leaves its boundary off its surface:
+    max(target − gap, GAP_FLOOR × target)."""
+    return max(target - gap, GAP_FLOOR * target)
+
+
+def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list[int], list[list[dict]],  # type: ignore[type-arg]
+                                                                           list[Field | None]]:
+    """The quality mesher's edges for the faces of `remesh`: short ones collapsed, the rest graded to the faces'
+    widths, lattices planned (their side edges at their rows); (the faces to mesh, their boundary loops, their
+    lattices). An edge this changes that bounds a face not in `remesh` (a later round's few faces: its neighbour's
+    mesh was made on the old points) brings that face in, and the planning runs again, until none does."""
+    while True:
+        before = dict(f.topo.edge_params)
+        faces = [f.model.faces[i] for i in remesh]
+        collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
+        grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
+        loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
+        planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
+                                target, f.params.angular, f.params.max_triangles)
+        f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
+        changed = [e for e, p in f.topo.edge_params.items() if e not in before or p is not before[e]]
+        more = set().union(*(_faces_of_edge(f.model, f.topo, e) for e in changed)) - set(remesh)
+        more = {i for i in more if f.surfaces[i] is not None}
+        if not more:
+            return remesh, loops, planned
+        for i in more:
+            discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
+        remesh = sorted(set(remesh) | more)
 
 
 def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None],  # type: ignore[type-arg]
@@ -234,9 +270,24 @@ def _measure(f: FaceStates, round_: int, todo: set[int], first_error: dict[int, 
             f.errors[i] = patch_error(f.patches[i], f.surfaces[i], f.params.check_order)
 
 
+def _measure_moved(f: FaceStates, moved: dict[int, np.ndarray]) -> None:
+    """The chordal error of the triangles touching a node seat_boundaries moved ({face: (k,) bool}) measured again
+    (the rest of a face's errors, measured before the move or by its mesher, stand: their corners did not move)."""
+    for i, m in moved.items():
+        p, surf = f.patches[i], f.surfaces[i]
+        if p is None or surf is None or p.uv is None or p.meshed_by == "stored" or len(f.errors[i]) != len(p.tris):
+            continue
+        t = np.flatnonzero(m[p.tris].any(axis=1))
+        errors = f.errors[i].copy()
+        errors[t] = triangle_chordal_error(p.nodes[p.tris[t]], p.uv[p.tris[t]], surf, f.params.check_order,
+                                           affine=surf.affine)
+        f.errors[i] = errors
+        f.patches[i] = replace(p, error=errors) if p.error is not None else p
+
+
 def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
-    """Split the edges of the faces over the tolerance whose own sagitta exceeds the target (a face's boundary chords
-    bound its error); the faces of every split edge, which must be meshed again."""
+    """Split the edges of the faces over the tolerance whose own sagitta exceeds the target less the B-rep's gap along
+    them (less_gap; a face's boundary chords bound its error); the faces of every split edge, to be meshed again."""
     target = f.tol * ENFORCE_MARGIN
     todo: set[int] = set()
     for i in over:
@@ -245,7 +296,7 @@ def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
             before = f.topo.edge_params.get(ei)
             if before is None:
                 continue
-            after = split_edge_to_tolerance(edge, before, target)
+            after = split_edge_to_tolerance(edge, before, less_gap(target, f.seating.edge_gap.get(ei, 0.0)))
             if len(after) != len(before):
                 f.topo.edge_params[ei] = after
                 todo |= _faces_of_edge(f.model, f.topo, ei)
@@ -254,7 +305,8 @@ def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
 
 def _mend(f: FaceStates, over: list[int], todo: set[int]) -> None:
     """Refine the faces over the tolerance whose boundary stands where they fail, the rest of their mesh kept
-    (large faces with few bad triangles and no pole); add every other face, and any mending fails, to `todo`."""
+    (large faces with few bad triangles and no pole); add every other face, and any whose mending fails or leaves it
+    worse (a region re-triangulated in a (u,v) space the face was not meshed in can span it), to `todo`."""
     target = f.tol * ENFORCE_MARGIN
     mend = []
     for i in over:
@@ -270,7 +322,8 @@ def _mend(f: FaceStates, over: list[int], todo: set[int]) -> None:
         refined = refine_patch(f.patches[i], f.errors[i], f.surfaces[i], target, order)  # type: ignore[arg-type]
         if refined is not None:
             refined = flip_flat_triangles(refined, f.surfaces[i], target, order, f.min_area)  # type: ignore[arg-type]
-        return None if refined is None or flat_triangles(refined, f.min_area).any() else refined
+        worse = refined is not None and np.nanmax(refined.error, initial=0) > np.nanmax(f.errors[i], initial=0)  # type: ignore[arg-type]
+        return None if refined is None or worse or flat_triangles(refined, f.min_area).any() else refined
 
     for i, refined in _costliest_first(mend_face, mend, f.patches, f.errors, target).items():
         if refined is None:

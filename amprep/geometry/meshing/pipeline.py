@@ -36,7 +36,9 @@ class MeshResult:
     """The welded mesh and how it was made: `face_error` (F,) max chordal error per face (nan: no surface),
     `tolerance` the absolute tolerance used, `fallback_faces` ids meshed by our own mesher, and why,
     `estimated_triangles` the count expected before meshing (estimate.py's from the B-rep; the quality mesher's
-    from its edges and the faces' curvature, prepare.quality_estimate)."""
+    from its edges and the faces' curvature, prepare.quality_estimate), `brep_gap` the largest distance of a shared
+    edge or vertex point of the output from a face it bounds (mm; weld.seat_boundaries): what the B-rep's faces miss their
+    shared edges by, counted in face_error."""
 
     mesh: Mesh
     tolerance: float
@@ -44,6 +46,7 @@ class MeshResult:
     fallback_faces: dict[int, str]
     unmeshed_faces: tuple[int, ...]
     estimated_triangles: int = 0
+    brep_gap: float = 0.0
 
     @property
     def max_error(self) -> float:
@@ -90,7 +93,7 @@ def _placed(part: MeshResult, inst: Instancing, model: CadModel) -> MeshResult:
                 for t in (int(tf[f]),)}
     unmeshed = tuple(np.flatnonzero(np.isin(tf, list(part.unmeshed_faces))).tolist())
     return MeshResult(expand_mesh(inst, part.mesh, infos), part.tolerance, part.face_error[tf], fallback, unmeshed,
-                      part.estimated_triangles)
+                      part.estimated_triangles, part.brep_gap)
 
 
 def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | None,
@@ -138,7 +141,7 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))),
-                      faces.estimated or prepared.estimated)
+                      faces.estimated or prepared.estimated, max(faces.seating.face_gap.values(), default=0.0))
 
 
 def _stored(model: CadModel, surfaces: list[Surface | None]) -> list:  # type: ignore[type-arg]

@@ -28,16 +28,24 @@ from amprep.geometry.meshing.uv_seed import DIFF_STEP, second_form
 
 def bbox_diagonal(model: CadModel, meshed: bool = False) -> float:
     """Diagonal of the model's bounding box (mm): the optimal (exact-geometry) box, or with `meshed` the box of
-    its triangulations (milliseconds where the optimal box of a free-form part takes seconds)."""
+    its triangulations (milliseconds where the optimal box of a free-form part takes seconds) where that is bounded
+    (a face with no triangulation adds its untrimmed surface: OCCT's ±1e100), else the optimal box; 0 when empty or
+    unbounded."""
     box = Bnd_Box()
     if meshed:
         BRepBndLib.Add_s(model.shape, box, True)
-    else:
+    if not meshed or _unbounded(box):
+        box = Bnd_Box()
         BRepBndLib.AddOptimal_s(model.shape, box, False, False)
-    if box.IsVoid():
+    if box.IsVoid() or _unbounded(box):
         return 0.0
     x0, y0, z0, x1, y1, z1 = box.Get()
     return float(np.linalg.norm([x1 - x0, y1 - y0, z1 - z0]))
+
+
+def _unbounded(box: Bnd_Box) -> bool:
+    """True when a non-void box is open or reaches OCCT's infinite (Precision::Infinite, 2e100) in any direction."""
+    return not box.IsVoid() and (box.IsOpen() or max(abs(c) for c in box.Get()) >= 1e99)
 
 
 def absolute_tolerance(model: CadModel, params: MeshParams) -> float:

@@ -1,16 +1,200 @@
 """Join face patches into one Mesh by topology: a node on a B-rep vertex is that vertex, a node on a B-rep
 edge is (edge, parameter); tessellated-only faces (no surface) share nodes with identical coordinates,
-which is how their file shares its coordinate list."""
+which is how their file shares its coordinate list.
+
+Before the tolerance is measured, boundary nodes are seated where the weld will put them (seat_boundaries): each
+B-rep vertex and each (B-rep edge, parameter) one point, where its faces meet, and each face's (u,v) of a node that
+moved its projection on that face. A face's error is then measured on the triangles it will have in the output:
+where the B-rep's faces miss their shared edge (a gap, or an edge that is not same-parameter: its pcurves reach a
+point away from the 3D curve's at one parameter) the difference is counted."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field, replace
+
 import numpy as np
 
+from amprep.geometry.cad.surfaces import Surface, project_points, tangents
 from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.occt_read import FacePatch
+
+#: a key's nodes are seated anew when one lies farther than this × the tolerance from their mean
+SEAT_REL = 1e-4
+#: a seated point stays within this × the farthest of its nodes from their mean of that mean: where the faces meet
+#: far from their edge (surfaces near tangent there, their gap across it) the edge is not moved to where they do
+SEAT_REACH = 2.0
+#: rounds of seat's iteration at most: each point moved to the least-squares point of its faces' tangent planes
+SEAT_ROUNDS = 4
+
+
+def node_keys(patch: FacePatch, nodes: np.ndarray, vertex_roots: np.ndarray | None) -> np.ndarray:
+    """(b, 3) int64 key rows of a patch's boundary nodes (b,) (each on a B-rep vertex or edge): (0, vertex, 0) on a
+    vertex (its root after collapses), (1, edge, parameter's bits) on an edge; the weld's identity of such nodes."""
+    vert = patch.node_vertex[nodes]
+    if vertex_roots is not None and len(vertex_roots):
+        vert = np.where(vert >= 0, vertex_roots[np.maximum(vert, 0)], -1)
+    on_v = vert >= 0
+    bits = np.ascontiguousarray(patch.node_param[nodes] + 0.0).view(np.int64)  # + 0.0: −0.0 and 0.0 one key
+    return np.stack([np.where(on_v, 0, 1), np.where(on_v, vert, patch.node_edge[nodes]), np.where(on_v, 0, bits)],
+                    axis=1).astype(np.int64)
+
+
+@dataclass
+class Seating:
+    """What seat_boundaries changed: `moved` {face: (k,) bool its nodes moved farther than SEAT_REL × tol}, and the
+    B-rep's gap (a seated point's distance from a face it bounds, after projection) per face and per B-rep edge,
+    the largest of any round (mm)."""
+
+    moved: dict[int, np.ndarray] = field(default_factory=dict)
+    face_gap: dict[int, float] = field(default_factory=dict)
+    edge_gap: dict[int, float] = field(default_factory=dict)
+
+    def add_gaps(self, other: Seating) -> None:
+        """Keep the larger gap of each face and edge of `other` (a later round's)."""
+        for mine, theirs in ((self.face_gap, other.face_gap), (self.edge_gap, other.edge_gap)):
+            for k, g in theirs.items():
+                mine[k] = max(mine.get(k, 0.0), g)
+
+
+def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | None], vertex_roots: np.ndarray | None,
+                    tol: float) -> Seating:
+    """Give every boundary node of `patches` (F,) (updated in place) one point per key (node_keys): where the nodes
+    of a key spread farther than SEAT_REL × tol from their mean, the point nearest all its faces' surfaces (seat's
+    iteration: where the faces meet, if they do near there), each such node's (u,v) its projection on its face (not
+    at a pole: a patch with several nodes on one vertex keeps their (u,v)); else the first patch's node (the point
+    the weld keeps, bit for bit)."""
+    out = Seating()
+    idx = [i for i, p in enumerate(patches) if p is not None and len(p.nodes)]
+    on = [np.flatnonzero((patches[i].node_vertex >= 0) | (patches[i].node_edge >= 0)) for i in idx]  # type: ignore[union-attr]
+    if not sum(len(b) for b in on):
+        return out
+    keys = [node_keys(patches[i], b, vertex_roots) for i, b in zip(idx, on, strict=True)]  # type: ignore[arg-type]
+    nodes = np.concatenate([patches[i].nodes[b] for i, b in zip(idx, on, strict=True)])  # type: ignore[union-attr]
+    group, first = _groups(np.concatenate(keys))
+    mean = _group_mean(group, nodes)
+    off = np.linalg.norm(mean[group] - nodes, axis=1)
+    reach = np.zeros(len(mean))
+    np.maximum.at(reach, group, SEAT_REACH * off)
+    spread = reach > SEAT_REACH * SEAT_REL * tol
+    far = spread[group]
+    offsets = np.cumsum([0] + [len(b) for b in on])
+    owner = np.repeat(np.arange(len(idx)), [len(b) for b in on])
+    movable = np.zeros(len(nodes), bool)  # a node whose (u,v) is projected: on a surface, not at a pole
+    uv = np.full((len(nodes), 2), np.nan)
+    for j, (i, k, b) in enumerate(zip(idx, keys, on, strict=True)):
+        p = patches[i]
+        local = np.flatnonzero(far[offsets[j]:offsets[j + 1]])
+        if not len(local) or surfaces[i] is None or p.uv is None or p.meshed_by == "stored":  # type: ignore[union-attr]
+            continue
+        vertex, uses = np.unique(k[k[:, 0] == 0, 1], return_counts=True)
+        local = local[~((k[local, 0] == 0) & np.isin(k[local, 1], vertex[uses > 1]))]
+        movable[offsets[j] + local] = True
+        uv[offsets[j] + local] = p.uv[b[local]]  # type: ignore[union-attr]
+    point = np.where(spread[:, None], mean, nodes[first])
+    for _ in range(SEAT_ROUNDS):
+        on_face, normal, _d = _project(point[group], uv, movable, nodes, owner, idx, surfaces)
+        step = np.where(spread[:, None], _nearest_step(group, point[group], on_face, normal, len(point)), 0.0)
+        again = _within(point + step, mean, reach)
+        step = again - point
+        point = again
+        if np.linalg.norm(step, axis=1).max(initial=0.0) <= SEAT_REL * tol:
+            break
+    _, _, dist = _project(point[group], uv, movable, nodes, owner, idx, surfaces)  # the (u,v) of the point kept
+    target = point[group]
+    for j, (i, b) in enumerate(zip(idx, on, strict=True)):
+        here = owner == j
+        if not (target[here] != nodes[here]).any():
+            continue
+        p = patches[i]
+        seated = p.nodes.copy()  # type: ignore[union-attr]
+        seated[b] = target[here]
+        new_uv = p.uv  # type: ignore[union-attr]
+        sel = here & movable
+        if sel.any():
+            new_uv = new_uv.copy()  # type: ignore[union-attr]
+            new_uv[b[sel[here]]] = uv[sel]
+        patches[i] = replace(p, nodes=seated, uv=new_uv)  # type: ignore[arg-type]
+        moved = here & far
+        if not moved.any():
+            continue
+        out.moved[i] = np.zeros(len(seated), bool)
+        out.moved[i][b[moved[here]]] = True
+        out.face_gap[i] = float(dist[moved].max(initial=0.0))
+        edge = p.node_edge[b[moved[here]]]  # type: ignore[union-attr]
+        for e, g in zip(*_max_by(edge[edge >= 0], dist[moved][edge >= 0]), strict=True):
+            out.edge_gap[e] = max(out.edge_gap.get(e, 0.0), g)
+    return out
+
+
+def _project(points: np.ndarray, uv: np.ndarray, movable: np.ndarray, nodes: np.ndarray, owner: np.ndarray,
+             idx: list[int], surfaces: list[Surface | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each movable row's point (n, 3) projected on its patch's surface, its (u,v) in `uv` (n, 2) updated from where
+    it was: ((n, 3) the projection, the row's own node elsewhere; (n, 3) the unit surface normal there, nan
+    elsewhere; (n,) the point's distance from it, 0 elsewhere)."""
+    on_face, normal, dist = nodes.copy(), np.full((len(nodes), 3), np.nan), np.zeros(len(nodes))
+    for j in np.unique(owner[movable]).tolist():
+        rows = np.flatnonzero(movable & (owner == j))
+        surface = surfaces[idx[j]]
+        uv[rows], dist[rows] = project_points(surface, points[rows], uv[rows])  # type: ignore[arg-type]
+        on_face[rows] = surface.evaluate(uv[rows])  # type: ignore[union-attr]
+        n = cross(*tangents(surface, uv[rows]))  # type: ignore[arg-type]
+        normal[rows] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return on_face, normal, dist
+
+
+def _nearest_step(group: np.ndarray, x: np.ndarray, on_face: np.ndarray, normal: np.ndarray, n_groups: int) -> np.ndarray:
+    """(g, 3) the step that takes each group's point (x (n, 3), one per row, equal in a group) to the least-squares
+    point of its rows' tangent planes (point on_face, unit normal; a row with no normal (nan) holds it at its own
+    point in every direction): solve (Σ n nᵀ + λI) s = Σ n (n·(p − x)), λ small, so a direction no plane fixes (along
+    the edge) gets no step. Newton on Σ distance²: where the faces meet, the point where they do."""
+    free = np.isnan(normal[:, 0])
+    nn = np.where(free[:, None, None], np.eye(3)[None], normal[:, :, None] * normal[:, None, :])
+    d = on_face - x
+    rhs = np.where(free[:, None], d, normal * (normal * d).sum(axis=1, keepdims=True))
+    a = np.zeros((n_groups, 3, 3))
+    b = np.zeros((n_groups, 3))
+    np.add.at(a, group, nn)
+    np.add.at(b, group, rhs)
+    return np.linalg.solve(a + 1e-6 * np.eye(3)[None], b[:, :, None])[:, :, 0]
+
+
+def _within(points: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """(g, 3) each point pulled back onto its ball (centre (g, 3), radius (g,)) when outside it."""
+    d = points - centres
+    r = np.linalg.norm(d, axis=1)
+    scale = np.where(r > radii, radii / np.maximum(r, 1e-300), 1.0)
+    return centres + d * scale[:, None]
+
+
+def _group_mean(group: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(g, 3) mean of the points (n, 3) of each group (n,)."""
+    count = np.bincount(group)
+    return np.stack([np.bincount(group, weights=points[:, k], minlength=len(count)) for k in range(3)], axis=1) \
+        / count[:, None]
+
+
+def _max_by(keys: np.ndarray, values: np.ndarray) -> tuple[list[int], list[float]]:
+    """(distinct keys, the largest value of each) of keys (n,) int and values (n,)."""
+    if not len(keys):
+        return [], []
+    order = np.lexsort((values, keys))
+    last = np.r_[keys[order][1:] != keys[order][:-1], True]
+    return keys[order][last].tolist(), values[order][last].tolist()
+
+
+def _groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((n,) group id of each key row (n, 3) int64, equal rows one id, ids in sorted order of the rows; (g,) the first
+    row of each group): a stable lexsort, which sorts int64 columns where np.unique(axis=0) sorts bytes, slower."""
+    order = np.lexsort(rows.T[::-1])
+    s = rows[order]
+    new = np.ones(len(s), bool)
+    new[1:] = (s[1:] != s[:-1]).any(axis=1)
+    group = np.empty(len(rows), np.int64)
+    group[order] = np.cumsum(new) - 1
+    return group, order[new]
 
 
 def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np.ndarray | None = None) -> Mesh:
