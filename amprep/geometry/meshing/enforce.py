@@ -87,7 +87,7 @@ class FaceStates:
     compiled: bool = False  # its faces meshed with the compiled kernels, as that estimate decided (_estimate)
     expected: dict[int, float] = field(default_factory=dict)  # that estimate per face, meshed once (_estimate)
     seating: Seating = field(default_factory=Seating)  # the B-rep's gaps at the faces' boundaries (weld.seat_boundaries)
-    tight: set[int] = field(default_factory=set)  # faces found over the tolerance: re-meshed to less_gap from then on
+    tight: set[int] = field(default_factory=set)  # faces over in two rounds running: meshed to less_gap from then on
 
     def __post_init__(self) -> None:
         self.errors = [np.zeros(0)] * len(self.patches)
@@ -103,6 +103,7 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
     for i in _open_collapsed_loops(f, todo) - todo:
         f.fallback[i] = "closed_edge"
         todo.add(i)
+    over: list[int] = []
     for round_ in range(ENFORCE_ROUNDS + 1):
         stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
         stage("re-meshing faces", 0.0)
@@ -113,12 +114,12 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
         _measure_moved(f, seating.moved)
         if not f.params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
             break
-        over = [i for i in range(len(f.patches)) if f.patches[i] is not None and len(f.errors[i])
-                and np.nanmax(f.errors[i], initial=0) > f.tol * TRIGGER_MARGIN
-                and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
+        before, over = set(over), [i for i in range(len(f.patches)) if f.patches[i] is not None and len(f.errors[i])
+                                    and np.nanmax(f.errors[i], initial=0) > f.tol * TRIGGER_MARGIN
+                                    and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
         if not over:
             break
-        f.tight.update(over)
+        f.tight.update(before.intersection(over))  # over twice running: the B-rep's gap is reckoned with from now
         todo = _split_edges(f, over)
         _mend(f, over, todo)
         for i in todo.union(over):
@@ -134,7 +135,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     for i in remesh:
         discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
     if f.params.quality:
-        remesh, loops, planned = _plan_quality(f, remesh, target)
+        loops, planned = _plan_quality(f, remesh, target)
     redone = set(remesh)
     kept = sum(len(p.tris) * int(f.uses[i]) for i, p in enumerate(f.patches) if p is not None and i not in redone)
     if f.params.quality and not f.estimated:
@@ -187,29 +188,30 @@ def less_gap(target: float, gap: float) -> float:
     return max(target - gap, GAP_FLOOR * target)
 
 
-def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list[int], list[list[dict]],  # type: ignore[type-arg]
-                                                                           list[Field | None]]:
+def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list[list[dict]], list[Field | None]]:  # type: ignore[type-arg]
     """The quality mesher's edges for the faces of `remesh`: short ones collapsed, the rest graded to the faces'
-    widths, lattices planned (their side edges at their rows); (the faces to mesh, their boundary loops, their
-    lattices). An edge this changes that bounds a face not in `remesh` (a later round's few faces: its neighbour's
-    mesh was made on the old points) brings that face in, and the planning runs again, until none does."""
-    while True:
-        before = dict(f.topo.edge_params)
-        faces = [f.model.faces[i] for i in remesh]
-        collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
-        grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
-        loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
-        planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
-                                target, f.params.angular, f.params.max_triangles)
-        f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
-        changed = [e for e, p in f.topo.edge_params.items() if e not in before or p is not before[e]]
-        more = set().union(*(_faces_of_edge(f.model, f.topo, e) for e in changed)) - set(remesh)
-        more = {i for i in more if f.surfaces[i] is not None}
-        if not more:
-            return remesh, loops, planned
-        for i in more:
-            discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
-        remesh = sorted(set(remesh) | more)
+    widths, lattices planned (their side edges at their rows); (their boundary loops, their lattices). An edge this
+    would change that bounds a face not in `remesh` (a later round's few faces, beside faces whose mesh stands on the
+    old points) keeps its points: a face of `remesh` on such an edge is not a lattice then (its rows may need them)."""
+    before = dict(f.topo.edge_params)
+    faces = [f.model.faces[i] for i in remesh]
+    collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
+    grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
+    loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
+    planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
+                            target, f.params.angular, f.params.max_triangles)
+    inside = set(remesh)
+    kept = {e for e, p in f.topo.edge_params.items() if e in before and p is not before[e]
+            and any(i not in inside and f.patches[i] is not None for i in _faces_of_edge(f.model, f.topo, e))}
+    for e in kept:
+        f.topo.edge_params[e] = before[e]
+    for k, i in enumerate(remesh):
+        if kept and any(f.topo.edge_index(e) in kept for e in face_edges(faces[k])):
+            planned[k] = None
+            loops[k] = _loops_to_plan(faces[k], f.topo, target, f.params.angular)
+            f.lattice.pop(i, None)
+    f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
+    return loops, planned
 
 
 def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None],  # type: ignore[type-arg]
@@ -286,17 +288,25 @@ def _measure_moved(f: FaceStates, moved: dict[int, np.ndarray]) -> None:
 
 
 def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
-    """Split the edges of the faces over the tolerance whose own sagitta exceeds the target less the B-rep's gap along
-    them (less_gap; a face's boundary chords bound its error); the faces of every split edge, to be meshed again."""
+    """Split the edges of the faces over the tolerance whose own sagitta exceeds the target (a face's boundary chords
+    bound its error), less the B-rep's gap along an edge a triangle over the target touches where the face is tight
+    (over two rounds running: the gap, not the sagitta, kept it over; less_gap); the faces of every split edge, to be
+    meshed again."""
     target = f.tol * ENFORCE_MARGIN
     todo: set[int] = set()
     for i in over:
+        p = f.patches[i]
+        touched: set[int] = set()
+        if p is not None and len(f.errors[i]) == len(p.tris):
+            edges = p.node_edge[p.tris[f.errors[i] > target]]
+            touched = set(np.unique(edges[edges >= 0]).tolist())
         for edge in face_edges(f.model.faces[i]):
             ei = f.topo.edge_index(edge)
             before = f.topo.edge_params.get(ei)
             if before is None:
                 continue
-            after = split_edge_to_tolerance(edge, before, less_gap(target, f.seating.edge_gap.get(ei, 0.0)))
+            gap = f.seating.edge_gap.get(ei, 0.0) if ei in touched and i in f.tight else 0.0
+            after = split_edge_to_tolerance(edge, before, less_gap(target, gap))
             if len(after) != len(before):
                 f.topo.edge_params[ei] = after
                 todo |= _faces_of_edge(f.model, f.topo, ei)

@@ -81,7 +81,6 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
     spread = reach > SEAT_REACH * SEAT_REL * tol
     far = spread[group]
     offsets = np.cumsum([0] + [len(b) for b in on])
-    owner = np.repeat(np.arange(len(idx)), [len(b) for b in on])
     movable = np.zeros(len(nodes), bool)  # a node whose (u,v) is projected: on a surface, not at a pole
     uv = np.full((len(nodes), 2), np.nan)
     for j, (i, k, b) in enumerate(zip(idx, keys, on, strict=True)):
@@ -95,48 +94,49 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
         uv[offsets[j] + local] = p.uv[b[local]]  # type: ignore[union-attr]
     point = np.where(spread[:, None], mean, nodes[first])
     for _ in range(SEAT_ROUNDS):
-        on_face, normal, _d = _project(point[group], uv, movable, nodes, owner, idx, surfaces)
+        on_face, normal, _d = _project(point[group], uv, movable, nodes, offsets, idx, surfaces)
         step = np.where(spread[:, None], _nearest_step(group, point[group], on_face, normal, len(point)), 0.0)
         again = _within(point + step, mean, reach)
         step = again - point
         point = again
         if np.linalg.norm(step, axis=1).max(initial=0.0) <= SEAT_REL * tol:
             break
-    _, _, dist = _project(point[group], uv, movable, nodes, owner, idx, surfaces)  # the (u,v) of the point kept
+    _, _, dist = _project(point[group], uv, movable, nodes, offsets, idx, surfaces)  # the (u,v) of the point kept
     target = point[group]
     for j, (i, b) in enumerate(zip(idx, on, strict=True)):
-        here = owner == j
+        here = slice(offsets[j], offsets[j + 1])
         if not (target[here] != nodes[here]).any():
             continue
         p = patches[i]
         seated = p.nodes.copy()  # type: ignore[union-attr]
         seated[b] = target[here]
         new_uv = p.uv  # type: ignore[union-attr]
-        sel = here & movable
+        sel = movable[here]
         if sel.any():
             new_uv = new_uv.copy()  # type: ignore[union-attr]
-            new_uv[b[sel[here]]] = uv[sel]
+            new_uv[b[sel]] = uv[here][sel]
         patches[i] = replace(p, nodes=seated, uv=new_uv)  # type: ignore[arg-type]
-        moved = here & far
+        moved = far[here]
         if not moved.any():
             continue
         out.moved[i] = np.zeros(len(seated), bool)
-        out.moved[i][b[moved[here]]] = True
-        out.face_gap[i] = float(dist[moved].max(initial=0.0))
-        edge = p.node_edge[b[moved[here]]]  # type: ignore[union-attr]
-        for e, g in zip(*_max_by(edge[edge >= 0], dist[moved][edge >= 0]), strict=True):
+        out.moved[i][b[moved]] = True
+        gap = dist[here][moved]
+        out.face_gap[i] = float(gap.max(initial=0.0))
+        edge = p.node_edge[b[moved]]  # type: ignore[union-attr]
+        for e, g in zip(*_max_by(edge[edge >= 0], gap[edge >= 0]), strict=True):
             out.edge_gap[e] = max(out.edge_gap.get(e, 0.0), g)
     return out
 
 
-def _project(points: np.ndarray, uv: np.ndarray, movable: np.ndarray, nodes: np.ndarray, owner: np.ndarray,
+def _project(points: np.ndarray, uv: np.ndarray, movable: np.ndarray, nodes: np.ndarray, offsets: np.ndarray,
              idx: list[int], surfaces: list[Surface | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each movable row's point (n, 3) projected on its patch's surface, its (u,v) in `uv` (n, 2) updated from where
     it was: ((n, 3) the projection, the row's own node elsewhere; (n, 3) the unit surface normal there, nan
     elsewhere; (n,) the point's distance from it, 0 elsewhere)."""
     on_face, normal, dist = nodes.copy(), np.full((len(nodes), 3), np.nan), np.zeros(len(nodes))
-    for j in np.unique(owner[movable]).tolist():
-        rows = np.flatnonzero(movable & (owner == j))
+    for j in np.unique(np.searchsorted(offsets, np.flatnonzero(movable), side="right") - 1).tolist():
+        rows = offsets[j] + np.flatnonzero(movable[offsets[j]:offsets[j + 1]])
         surface = surfaces[idx[j]]
         uv[rows], dist[rows] = project_points(surface, points[rows], uv[rows])  # type: ignore[arg-type]
         on_face[rows] = surface.evaluate(uv[rows])  # type: ignore[union-attr]
@@ -154,10 +154,9 @@ def _nearest_step(group: np.ndarray, x: np.ndarray, on_face: np.ndarray, normal:
     nn = np.where(free[:, None, None], np.eye(3)[None], normal[:, :, None] * normal[:, None, :])
     d = on_face - x
     rhs = np.where(free[:, None], d, normal * (normal * d).sum(axis=1, keepdims=True))
-    a = np.zeros((n_groups, 3, 3))
-    b = np.zeros((n_groups, 3))
-    np.add.at(a, group, nn)
-    np.add.at(b, group, rhs)
+    a = np.stack([np.bincount(group, weights=nn[:, i, j], minlength=n_groups) for i in range(3) for j in range(3)],
+                 axis=1).reshape(-1, 3, 3)
+    b = np.stack([np.bincount(group, weights=rhs[:, i], minlength=n_groups) for i in range(3)], axis=1)
     return np.linalg.solve(a + 1e-6 * np.eye(3)[None], b[:, :, None])[:, :, 0]
 
 
