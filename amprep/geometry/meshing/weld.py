@@ -26,6 +26,8 @@ SEAT_REL = 1e-4
 #: a seated point stays within this × the farthest of its nodes from their mean of that mean: where the faces meet
 #: far from their edge (surfaces near tangent there, their gap across it) the edge is not moved to where they do
 SEAT_REACH = 2.0
+#: keys whose nodes lie within this × the tolerance of their mean are seated at the mean, with no iteration
+NEWTON_REL = 1e-3
 #: rounds of seat's iteration at most: each point moved to the least-squares point of its faces' tangent planes
 SEAT_ROUNDS = 4
 
@@ -93,15 +95,17 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
         movable[offsets[j] + local] = True
         uv[offsets[j] + local] = p.uv[b[local]]  # type: ignore[union-attr]
     point = np.where(spread[:, None], mean, nodes[first])
+    active = reach > SEAT_REACH * NEWTON_REL * tol  # keys whose faces' meeting point is worth the iteration
     for _ in range(SEAT_ROUNDS):
-        on_face, normal, _d = _project(point[group], uv, movable, nodes, offsets, idx, surfaces)
-        step = np.where(spread[:, None], _nearest_step(group, point[group], on_face, normal, len(point)), 0.0)
-        again = _within(point + step, mean, reach)
-        step = again - point
-        point = again
-        if np.linalg.norm(step, axis=1).max(initial=0.0) <= SEAT_REL * tol:
+        if not active.any():
             break
-    _, _, dist = _project(point[group], uv, movable, nodes, offsets, idx, surfaces)  # the (u,v) of the point kept
+        on_face, normal, _d = _project(point[group], uv, movable & active[group], nodes, offsets, idx, surfaces)
+        step = np.where(active[:, None], _nearest_step(group, point[group], on_face, normal, len(point)), 0.0)
+        again = _within(point + step, mean, reach)
+        active &= np.linalg.norm(again - point, axis=1) > SEAT_REL * tol
+        point = again
+    # the (u,v) of the point kept: a step or two from where the last projection (or the node's own) left it
+    _, _, dist = _project(point[group], uv, movable, nodes, offsets, idx, surfaces, iterations=2, normals=False)
     target = point[group]
     for j, (i, b) in enumerate(zip(idx, on, strict=True)):
         here = slice(offsets[j], offsets[j + 1])
@@ -130,15 +134,19 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
 
 
 def _project(points: np.ndarray, uv: np.ndarray, movable: np.ndarray, nodes: np.ndarray, offsets: np.ndarray,
-             idx: list[int], surfaces: list[Surface | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each movable row's point (n, 3) projected on its patch's surface, its (u,v) in `uv` (n, 2) updated from where
-    it was: ((n, 3) the projection, the row's own node elsewhere; (n, 3) the unit surface normal there, nan
-    elsewhere; (n,) the point's distance from it, 0 elsewhere)."""
+             idx: list[int], surfaces: list[Surface | None], iterations: int = 12,
+             normals: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each movable row's point (n, 3) projected on its patch's surface (at most `iterations` Gauss–Newton steps), its
+    (u,v) in `uv` (n, 2) updated from where it was: ((n, 3) the projection, the row's own node elsewhere; (n, 3) the
+    unit surface normal there, nan elsewhere; (n,) the point's distance from it, 0 elsewhere); with `normals` False
+    only `uv` and the distances."""
     on_face, normal, dist = nodes.copy(), np.full((len(nodes), 3), np.nan), np.zeros(len(nodes))
     for j in np.unique(np.searchsorted(offsets, np.flatnonzero(movable), side="right") - 1).tolist():
         rows = offsets[j] + np.flatnonzero(movable[offsets[j]:offsets[j + 1]])
         surface = surfaces[idx[j]]
-        uv[rows], dist[rows] = project_points(surface, points[rows], uv[rows])  # type: ignore[arg-type]
+        uv[rows], dist[rows] = project_points(surface, points[rows], uv[rows], iterations)  # type: ignore[arg-type]
+        if not normals:
+            continue
         on_face[rows] = surface.evaluate(uv[rows])  # type: ignore[union-attr]
         n = cross(*tangents(surface, uv[rows]))  # type: ignore[arg-type]
         normal[rows] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
