@@ -9,8 +9,10 @@ from typing import Any
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.bspline import COMPILED_MIN_POINTS
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface, surface_of
+from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import Progress
 from amprep.geometry.measure import cusp
@@ -54,8 +56,8 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
     other corners in its free parameter (project.with_free_corners_centred); stl_mismatch when it does not fit."""
     from dataclasses import replace
 
-    from amprep.geometry.placement.align import align, point_to_plane
-    from amprep.geometry.placement.project import ReferenceCloud, isolate, surface_normals, with_free_corners_centred
+    from amprep.geometry.placement.align import align
+    from amprep.geometry.placement.project import ReferenceCloud
 
     prog = prog or Progress(None)
     diag = float(np.linalg.norm(np.ptp(user.vertices, axis=0)))
@@ -74,13 +76,38 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
     fit = align(user.vertices, cloud.points, inlier_distance=tol + spacing, stl_cloud=even, cad_cloud=cad_even)
     surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
     prog("isolating faces", 0.8)
+    # each round projects every corner on its candidate faces, a few points per call: B-splines by the compiled
+    # evaluator when the part has any and the STL is large enough (decided by the input, not by what is loaded)
+    with compiled(_worth_compiling(user, surfaces)):
+        scored, fit = _polished(user, fit, cloud, surfaces, reference.mesh.faces, tol, spacing, diag)
+    prog("placed", 1.0)
+    return PlacedStl(scored, fit, tol, surfaces, reference.mesh.faces)
+
+
+def _worth_compiling(user: Mesh, surfaces: dict[int, Surface]) -> bool:
+    """True when placing `user` projects enough corners on B-spline or Bézier faces to pay numba's start-up: every
+    corner of the STL, POLISH_ROUNDS + 1 times, at least once."""
+    free_form = any(s.surface_type in ("bspline", "bezier") and s.data is not None for s in surfaces.values())
+    return free_form and 3 * user.n_triangles * (POLISH_ROUNDS + 1) >= COMPILED_MIN_POINTS
+
+
+def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], faces: tuple, tol: float,
+              spacing: float, diag: float) -> tuple[Mesh, Any]:
+    """(the STL placed: each triangle its face within `tol`, (u,v), free corners centred; the fit polished against
+    the exact surfaces): corners matched within the coarse fit's reach pulled onto their faces' tangent planes, round
+    by round, until a round moves none by more than SETTLED × the diagonal."""
+    from dataclasses import replace
+
+    from amprep.geometry.placement.align import point_to_plane
+    from amprep.geometry.placement.project import isolate, surface_normals, with_free_corners_centred
+
     # the polish matches within the coarse fit's reach too: ICP on area samples of a coarse STL sits its facets, not
     # its corners, on the surface (a 0.5 mm STL of a 12 mm cone: 0.07 mm off, no corner within tol)
     reach = tol + spacing + 3 * fit.rms
     snap = max(SNAP * diag, 8 * float(np.spacing(np.float32(np.abs(user.vertices).max()))))
     for _ in range(POLISH_ROUNDS):  # polish the fit against the exact surfaces: matched corners onto their planes
         placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
-        scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, reach, snap)
+        scored, dist = isolate(placed, cloud, surfaces, faces, reach, snap)
         ok = scored.face_ids >= 0
         if ok.sum() < 3:
             break
@@ -102,14 +129,13 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
         if turn + np.linalg.norm(dt) <= SETTLED * diag:
             break  # no corner moved by more than that: the rounds after it move them by rounding noise
     placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
-    scored, dist = isolate(placed, cloud, surfaces, reference.mesh.faces, tol, snap)
+    scored, dist = isolate(placed, cloud, surfaces, faces, tol, snap)
     # a pole's free parameter, wherever its projection left it, would fold its triangles' (u,v)
     scored = with_free_corners_centred(scored, surfaces, snap)
     d_ok = dist[scored.face_ids >= 0]
     fit = replace(fit, rms=float(np.sqrt(np.mean(d_ok**2))) if d_ok.size else fit.rms,
                   max=float(d_ok.max()) if d_ok.size else fit.max)
-    prog("placed", 1.0)
-    return PlacedStl(scored, fit, tol, surfaces, reference.mesh.faces)
+    return scored, fit
 
 
 def unmatched_issue(placed: PlacedStl) -> Issue:
