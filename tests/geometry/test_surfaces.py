@@ -104,3 +104,30 @@ def test_surfaces_of_revolution_and_extrusion_are_evaluated_in_numpy_and_match_o
     res = mesh_model(model, MeshParams(tolerance=0.01))
     c = check_mesh(res.mesh)
     assert c.closed and c.degenerate_triangles == 0 and res.max_error <= 0.01
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3, 5, 9])
+def test_basis_functions_match_the_recursive_definition(degree):
+    """Cox–de Boor's recursion, N_{i,0} = [k_i ≤ t < k_{i+1}], N_{i,p} = (t − k_i)/(k_{i+p} − k_i)·N_{i,p−1} +
+    (k_{i+p+1} − t)/(k_{i+p+1} − k_{i+1})·N_{i+1,p−1} (0/0 = 0), evaluated point by point, against the
+    vectorised triangle, on a clamped knot vector with a double knot and at the knots themselves."""
+    from amprep.geometry.cad.bspline import basis_functions, find_span
+
+    rng = np.random.default_rng(degree)
+    inner = np.sort(rng.random(12))
+    inner[4] = inner[5]
+    knots = np.concatenate([np.zeros(degree + 1), inner, np.ones(degree + 1)])
+
+    def n(i: int, p: int, t: float) -> float:
+        if p == 0:
+            return float(knots[i] <= t < knots[i + 1])
+        a = (t - knots[i]) / (knots[i + p] - knots[i]) if knots[i + p] > knots[i] else 0.0
+        b = (knots[i + p + 1] - t) / (knots[i + p + 1] - knots[i + 1]) if knots[i + p + 1] > knots[i + 1] else 0.0
+        return a * n(i, p - 1, t) + b * n(i + 1, p - 1, t)
+
+    t = np.concatenate([rng.random(40), inner[:-1]])
+    span = find_span(knots, degree, t)
+    got = basis_functions(knots, degree, t, span)
+    want = np.array([[n(s - degree + a, degree, x) for a in range(degree + 1)] for x, s in zip(t, span, strict=True)])
+    assert np.allclose(got, want, rtol=0, atol=1e-12)
+    assert np.allclose(got.sum(axis=1), 1.0, atol=1e-12)

@@ -17,22 +17,24 @@ def find_span(knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
 
 
 def basis_functions(knots: np.ndarray, degree: int, t: np.ndarray, span: np.ndarray) -> np.ndarray:
-    """(N, degree+1) non-zero basis values N_{span−p+a, p}(t) by the Cox–de Boor triangle (Piegl–Tiller A2.2)."""
+    """(N, degree+1) non-zero basis values N_{span−p+a, p}(t) by the Cox–de Boor triangle (Piegl–Tiller A2.2), each
+    row of the triangle at once: N_r ← right_{r+1}·N_r/(right_{r+1} + left_{j−r}) + left_{j−r+1}·N_{r−1}/(…), a
+    zero denominator giving 0 (the same sums as A2.2's inner loop, in the same order)."""
     n = len(t)
-    basis = np.zeros((n, degree + 1))
-    basis[:, 0] = 1.0
-    left = np.zeros((n, degree + 1))
-    right = np.zeros((n, degree + 1))
+    basis = np.ones((n, 1))
+    steps = np.arange(1, degree + 1)
+    left = t[:, None] - knots[span[:, None] + 1 - steps]  # (N, p): column j − 1 is left_j = t − knots[span + 1 − j]
+    right = knots[span[:, None] + steps] - t[:, None]  # column j − 1 is right_j = knots[span + j] − t
     for j in range(1, degree + 1):
-        left[:, j] = t - knots[span + 1 - j]
-        right[:, j] = knots[span + j] - t
-        saved = np.zeros(n)
-        for r in range(j):
-            denom = right[:, r + 1] + left[:, j - r]
-            temp = np.divide(basis[:, r], denom, out=np.zeros(n), where=denom != 0)
-            basis[:, r] = saved + right[:, r + 1] * temp
-            saved = left[:, j - r] * temp
-        basis[:, j] = saved
+        r_, l_ = right[:, :j], left[:, j - 1::-1]  # right_{r+1} and left_{j−r} for r = 0 … j − 1
+        denom = r_ + l_
+        denom[denom == 0] = np.inf  # N_r / ∞ = 0: A2.2's skipped term
+        temp = basis / denom
+        out = np.empty((n, j + 1))
+        out[:, :j] = r_ * temp
+        out[:, j] = 0.0
+        out[:, 1:] += l_ * temp
+        basis = out
     return basis
 
 
