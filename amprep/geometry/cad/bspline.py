@@ -84,13 +84,24 @@ def eval_surface(
     poles: np.ndarray, weights: np.ndarray, uknots: np.ndarray, vknots: np.ndarray,
     udeg: int, vdeg: int, uv: np.ndarray,
 ) -> np.ndarray:
-    """(N, 3) S(u,v) = Σ N_i(u) N_j(v) w_ij P_ij / Σ N_i(u) N_j(v) w_ij; poles (nu, nv, 3), weights (nu, nv).
+    """(N, 3) S(u,v) = Σ N_i(u) N_j(v) w_ij P_ij / Σ N_i(u) N_j(v) w_ij; poles (nu, nv, 3), weights (nu, nv)."""
+    return eval_homogeneous(homogeneous_poles(poles, weights), np.ascontiguousarray(uknots, dtype=np.float64),
+                            np.ascontiguousarray(vknots, dtype=np.float64), udeg, vdeg, uv)
+
+
+def homogeneous_poles(poles: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(nu, nv, 4) contiguous (w·P, w) of poles (nu, nv, 3) and weights (nu, nv): what eval_homogeneous takes."""
+    return np.ascontiguousarray(np.concatenate([poles * weights[..., None], weights[..., None]], axis=2))
+
+
+def eval_homogeneous(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, udeg: int, vdeg: int,
+                     uv: np.ndarray) -> np.ndarray:
+    """eval_surface from homogeneous_poles and contiguous float64 knots, made once per surface.
 
     The numba kernel of _bspline_kernel.py runs where core.compiled.use_compiled says (the computation's choice, or
     calls of ≥ COMPILED_MIN_POINTS points), numpy otherwise, so a small part never pays numba's ~0.7 s start-up and
     no result depends on whether the kernel happens to be loaded."""
     global _kernel
-    pw = np.ascontiguousarray(np.concatenate([poles * weights[..., None], weights[..., None]], axis=2))
     if not use_compiled(len(uv), COMPILED_MIN_POINTS):
         return _eval_surface_numpy(pw, uknots, vknots, udeg, vdeg, np.asarray(uv, dtype=np.float64))
     if _kernel is None:
@@ -99,7 +110,6 @@ def eval_surface(
     out = np.empty((len(uv), 3))
     parallel, serial, block = _kernel
     run = serial if len(uv) <= block else parallel
-    run(pw, np.ascontiguousarray(uknots, dtype=np.float64), np.ascontiguousarray(vknots, dtype=np.float64),
-        int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
+    run(pw, uknots, vknots, int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
     return out
 

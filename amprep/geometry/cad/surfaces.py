@@ -22,7 +22,7 @@ from OCP.GeomAbs import (
 from OCP.GeomConvert import GeomConvert
 from OCP.TopoDS import TopoDS_Face
 
-from amprep.geometry.cad.bspline import eval_surface
+from amprep.geometry.cad.bspline import eval_homogeneous, homogeneous_poles
 from amprep.geometry.cad.occt_arrays import array1, vec
 from amprep.geometry.cad.swept import curve_of, extrusion, revolution
 
@@ -68,9 +68,9 @@ def uv_extent(surface: Surface) -> np.ndarray:
 def tangents(surface: Surface, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(S_u, S_v) (n, 3) each at (n, 2) uv, by central differences of 1e-6 × uv_extent."""
     h = 1e-6 * uv_extent(surface)
-    su = (surface.evaluate(uv + [h[0], 0]) - surface.evaluate(uv - [h[0], 0])) / (2 * h[0])
-    sv = (surface.evaluate(uv + [0, h[1]]) - surface.evaluate(uv - [0, h[1]])) / (2 * h[1])
-    return su, sv
+    n = len(uv)
+    s = surface.evaluate(np.concatenate([uv + [h[0], 0], uv - [h[0], 0], uv + [0, h[1]], uv - [0, h[1]]]))  # one call
+    return (s[:n] - s[n:2 * n]) / (2 * h[0]), (s[2 * n:3 * n] - s[3 * n:]) / (2 * h[1])
 
 
 def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12,
@@ -235,8 +235,10 @@ def _surface(ad: BRepAdaptor_Surface) -> Surface:
     if kind in (GeomAbs_BSplineSurface, GeomAbs_BezierSurface):
         geom = ad.BSpline() if kind == GeomAbs_BSplineSurface else GeomConvert.SurfaceToBSplineSurface_s(ad.Bezier())
         d = bspline_data(geom)
-        return Surface(name, lambda uv: eval_surface(d["poles"], d["weights"], d["uknots"], d["vknots"], d["udeg"],
-                                                     d["vdeg"], wrap_periodic(uv, d["uperiod"], d["vperiod"])), data=d)
+        pw = homogeneous_poles(d["poles"], d["weights"])
+        uk, vk = (np.ascontiguousarray(d[k], dtype=np.float64) for k in ("uknots", "vknots"))
+        return Surface(name, lambda uv: eval_homogeneous(pw, uk, vk, d["udeg"], d["vdeg"],
+                                                         wrap_periodic(uv, d["uperiod"], d["vperiod"])), data=d)
     if kind in (GeomAbs_SurfaceOfRevolution, GeomAbs_SurfaceOfExtrusion):
         swept = _swept(ad, kind)
         if swept is not None:
