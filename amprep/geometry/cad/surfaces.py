@@ -25,6 +25,7 @@ from OCP.TopoDS import TopoDS_Face
 from amprep.geometry.cad.bspline import eval_homogeneous, homogeneous_poles
 from amprep.geometry.cad.occt_arrays import array1, vec
 from amprep.geometry.cad.swept import curve_of, extrusion, revolution
+from amprep.geometry.core.vectors import cross
 
 SURFACE_TYPES = {
     GeomAbs_Plane: "plane", GeomAbs_Cylinder: "cylinder", GeomAbs_Cone: "cone", GeomAbs_Sphere: "sphere",
@@ -71,6 +72,15 @@ def tangents(surface: Surface, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = len(uv)
     s = surface.evaluate(np.concatenate([uv + [h[0], 0], uv - [h[0], 0], uv + [0, h[1]], uv - [0, h[1]]]))  # one call
     return (s[:n] - s[n:2 * n]) / (2 * h[0]), (s[2 * n:3 * n] - s[3 * n:]) / (2 * h[1])
+
+
+def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
+    """(n, 3) unit normals S_u × S_v / |S_u × S_v| at (n, 2) uv; zero where the two are parallel (a pole, an apex)."""
+    su, sv = tangents(surface, np.asarray(uv, float))
+    n = cross(su, sv)
+    size = np.linalg.norm(n, axis=1, keepdims=True)
+    scale = np.linalg.norm(su, axis=1, keepdims=True) * np.linalg.norm(sv, axis=1, keepdims=True)
+    return np.where(size > 1e-9 * scale, n / np.where(size > 0, size, 1.0), 0.0)
 
 
 def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12,

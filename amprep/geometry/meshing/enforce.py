@@ -36,7 +36,7 @@ from amprep.geometry.meshing.shared_edges import (
     split_edge_to_tolerance,
 )
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING
-from amprep.geometry.meshing.weld import Seating, seat_boundaries
+from amprep.geometry.meshing.weld import BrepGaps, seat_boundaries
 from amprep.geometry.parallel.face_pool import SharedCount, map_faces
 
 ENFORCE_ROUNDS = 4
@@ -86,7 +86,7 @@ class FaceStates:
     estimated: int = 0  # the quality mesher's estimate, once made (_estimate)
     compiled: bool = False  # its faces meshed with the compiled kernels, as that estimate decided (_estimate)
     expected: dict[int, float] = field(default_factory=dict)  # that estimate per face, meshed once (_estimate)
-    seating: Seating = field(default_factory=Seating)  # the B-rep's gaps at the faces' boundaries (weld.seat_boundaries)
+    gaps: BrepGaps = field(default_factory=BrepGaps)  # the B-rep's gaps at the faces' boundaries (weld.seat_boundaries)
     tight: set[int] = field(default_factory=set)  # faces over in two rounds running: meshed to less_gap from then on
 
     def __post_init__(self) -> None:
@@ -108,10 +108,9 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
         stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
         stage("re-meshing faces", 0.0)
         _remesh(f, todo)
-        seating = seat_boundaries(f.patches, f.surfaces, f.topo.vertex_roots(), f.tol)
-        f.seating.add_gaps(seating)
+        moved = seat_boundaries(f.patches, f.surfaces, f.topo.vertex_roots(), f.tol, f.gaps)
         _measure(f, round_, todo, first_error, stage)
-        _measure_moved(f, seating.moved)
+        _measure_moved(f, moved)
         if not f.params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
             break
         before, over = set(over), [i for i in range(len(f.patches)) if f.patches[i] is not None and len(f.errors[i])
@@ -154,7 +153,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
 
     def mesh_one(i: int) -> FacePatch | None:
         old = f.patches[i]
-        face_target = less_gap(target, f.seating.face_gap.get(i, 0.0)) if i in f.tight else target
+        face_target = less_gap(target, f.gaps.face.get(i, 0.0)) if i in f.tight else target
         seeds = None
         if old is not None and old.uv is not None:
             seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
@@ -305,7 +304,7 @@ def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
             before = f.topo.edge_params.get(ei)
             if before is None:
                 continue
-            gap = f.seating.edge_gap.get(ei, 0.0) if ei in touched and i in f.tight else 0.0
+            gap = f.gaps.edge.get(ei, 0.0) if ei in touched and i in f.tight else 0.0
             after = split_edge_to_tolerance(edge, before, less_gap(target, gap))
             if len(after) != len(before):
                 f.topo.edge_params[ei] = after

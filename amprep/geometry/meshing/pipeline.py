@@ -141,7 +141,7 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))),
-                      faces.estimated or prepared.estimated, max(faces.seating.face_gap.values(), default=0.0))
+                      faces.estimated or prepared.estimated, max(faces.gaps.face.values(), default=0.0))
 
 
 def _stored(model: CadModel, surfaces: list[Surface | None]) -> list:  # type: ignore[type-arg]

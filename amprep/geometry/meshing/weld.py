@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from amprep.geometry.cad.surfaces import Surface, project_points, tangents
+from amprep.geometry.cad.surfaces import Surface, project_points, surface_normals
 from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
@@ -45,34 +45,34 @@ def node_keys(patch: FacePatch, nodes: np.ndarray, vertex_roots: np.ndarray | No
 
 
 @dataclass
-class Seating:
-    """What seat_boundaries changed: `moved` {face: (k,) bool its nodes moved farther than SEAT_REL × tol}, and the
-    B-rep's gap (a seated point's distance from a face it bounds, after projection) per face and per B-rep edge,
-    the largest of any round (mm)."""
+class BrepGaps:
+    """The B-rep's gap: a seated node's distance from a face it bounds, after projection; the largest seen in any round,
+    per face and per B-rep edge (mm)."""
 
-    moved: dict[int, np.ndarray] = field(default_factory=dict)
-    face_gap: dict[int, float] = field(default_factory=dict)
-    edge_gap: dict[int, float] = field(default_factory=dict)
+    face: dict[int, float] = field(default_factory=dict)
+    edge: dict[int, float] = field(default_factory=dict)
 
-    def add_gaps(self, other: Seating) -> None:
-        """Keep the larger gap of each face and edge of `other` (a later round's)."""
-        for mine, theirs in ((self.face_gap, other.face_gap), (self.edge_gap, other.edge_gap)):
-            for k, g in theirs.items():
-                mine[k] = max(mine.get(k, 0.0), g)
+    def record(self, face: int, edges: np.ndarray, gap: np.ndarray) -> None:
+        """Keep the largest of the gaps (n,) of a face's nodes, for the face and for each node's edge (n,) (−1: a
+        vertex, no edge)."""
+        self.face[face] = max(self.face.get(face, 0.0), float(gap.max(initial=0.0)))
+        for e, g in zip(*_max_by(edges[edges >= 0], gap[edges >= 0]), strict=True):
+            self.edge[e] = max(self.edge.get(e, 0.0), g)
 
 
 def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | None], vertex_roots: np.ndarray | None,
-                    tol: float) -> Seating:
+                    tol: float, gaps: BrepGaps) -> dict[int, np.ndarray]:
     """Give every boundary node of `patches` (F,) (updated in place) one point per key (node_keys): where the nodes
     of a key spread farther than SEAT_REL × tol from their mean, the point nearest all its faces' surfaces (seat's
     iteration: where the faces meet, if they do near there), each such node's (u,v) its projection on its face (not
     at a pole: a patch with several nodes on one vertex keeps their (u,v)); else the first patch's node (the point
-    the weld keeps, bit for bit)."""
-    out = Seating()
+    the weld keeps, bit for bit). Returns {face: (k,) bool its nodes moved farther than SEAT_REL × tol}; each such
+    node's distance from its face after projection goes into `gaps`."""
+    moved_nodes: dict[int, np.ndarray] = {}
     idx = [i for i, p in enumerate(patches) if p is not None and len(p.nodes)]
     on = [np.flatnonzero((patches[i].node_vertex >= 0) | (patches[i].node_edge >= 0)) for i in idx]  # type: ignore[union-attr]
     if not sum(len(b) for b in on):
-        return out
+        return moved_nodes
     keys = [node_keys(patches[i], b, vertex_roots) for i, b in zip(idx, on, strict=True)]  # type: ignore[arg-type]
     nodes = np.concatenate([patches[i].nodes[b] for i, b in zip(idx, on, strict=True)])  # type: ignore[union-attr]
     group, first = _groups(np.concatenate(keys))
@@ -123,14 +123,10 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
         moved = far[here]
         if not moved.any():
             continue
-        out.moved[i] = np.zeros(len(seated), bool)
-        out.moved[i][b[moved]] = True
-        gap = dist[here][moved]
-        out.face_gap[i] = float(gap.max(initial=0.0))
-        edge = p.node_edge[b[moved]]  # type: ignore[union-attr]
-        for e, g in zip(*_max_by(edge[edge >= 0], gap[edge >= 0]), strict=True):
-            out.edge_gap[e] = max(out.edge_gap.get(e, 0.0), g)
-    return out
+        moved_nodes[i] = np.zeros(len(seated), bool)
+        moved_nodes[i][b[moved]] = True
+        gaps.record(i, p.node_edge[b[moved]], dist[here][moved])  # type: ignore[union-attr]
+    return moved_nodes
 
 
 def _project(points: np.ndarray, uv: np.ndarray, movable: np.ndarray, nodes: np.ndarray, offsets: np.ndarray,
@@ -138,7 +134,7 @@ def _project(points: np.ndarray, uv: np.ndarray, movable: np.ndarray, nodes: np.
              normals: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each movable row's point (n, 3) projected on its patch's surface (at most `iterations` Gauss–Newton steps), its
     (u,v) in `uv` (n, 2) updated from where it was: ((n, 3) the projection, the row's own node elsewhere; (n, 3) the
-    unit surface normal there, nan elsewhere; (n,) the point's distance from it, 0 elsewhere); with `normals` False
+    unit surface normal there (0 where S_u ∥ S_v), nan elsewhere; (n,) the point's distance from it, 0 elsewhere); with `normals` False
     only `uv` and the distances."""
     on_face, normal, dist = nodes.copy(), np.full((len(nodes), 3), np.nan), np.zeros(len(nodes))
     for j in np.unique(np.searchsorted(offsets, np.flatnonzero(movable), side="right") - 1).tolist():
@@ -148,15 +144,14 @@ def _project(points: np.ndarray, uv: np.ndarray, movable: np.ndarray, nodes: np.
         if not normals:
             continue
         on_face[rows] = surface.evaluate(uv[rows])  # type: ignore[union-attr]
-        n = cross(*tangents(surface, uv[rows]))  # type: ignore[arg-type]
-        normal[rows] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        normal[rows] = surface_normals(surface, uv[rows])  # type: ignore[arg-type]
     return on_face, normal, dist
 
 
 def _nearest_step(group: np.ndarray, x: np.ndarray, on_face: np.ndarray, normal: np.ndarray, n_groups: int) -> np.ndarray:
     """(g, 3) the step that takes each group's point (x (n, 3), one per row, equal in a group) to the least-squares
     point of its rows' tangent planes (point on_face, unit normal; a row with no normal (nan) holds it at its own
-    point in every direction): solve (Σ n nᵀ + λI) s = Σ n (n·(p − x)), λ small, so a direction no plane fixes (along
+    point in every direction, a zero normal, at an apex, adds nothing): solve (Σ n nᵀ + λI) s = Σ n (n·(p − x)), λ small, so a direction no plane fixes (along
     the edge) gets no step. Newton on Σ distance²: where the faces meet, the point where they do."""
     free = np.isnan(normal[:, 0])
     nn = np.where(free[:, None, None], np.eye(3)[None], normal[:, :, None] * normal[:, None, :])

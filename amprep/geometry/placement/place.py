@@ -98,8 +98,9 @@ def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], fa
     by round, until a round moves none by more than SETTLED × the diagonal."""
     from dataclasses import replace
 
+    from amprep.geometry.cad.surfaces import surface_normals
     from amprep.geometry.placement.align import point_to_plane
-    from amprep.geometry.placement.project import isolate, surface_normals, with_free_corners_centred
+    from amprep.geometry.placement.project import isolate, with_free_corners_centred
 
     # the polish matches within the coarse fit's reach too: ICP on area samples of a coarse STL sits its facets, not
     # its corners, on the surface (a 0.5 mm STL of a 12 mm cone: 0.07 mm off, no corner within tol)

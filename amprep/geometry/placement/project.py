@@ -7,10 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from amprep.geometry.cad.surfaces import Surface, project_points, tangents
+from amprep.geometry.cad.surfaces import Surface, project_points
 from amprep.geometry.core.checks import triangle_areas
 from amprep.geometry.core.mesh import FaceInfo, Mesh
-from amprep.geometry.core.vectors import cross
 
 
 @dataclass(frozen=True)
@@ -65,15 +64,6 @@ def row_samples(corners: np.ndarray, spacing: float, max_points: int) -> tuple[n
     w[np.arange(total), (a + 1) % 3] = (1 - fr) * g
     w[np.arange(total), (a + 2) % 3] = fr
     return tri, w
-
-
-def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
-    """(n, 3) unit normals S_u × S_v / |S_u × S_v| at (n, 2) uv; zero where the two are parallel (a pole, an apex)."""
-    su, sv = tangents(surface, np.asarray(uv, float))
-    n = cross(su, sv)
-    size = np.linalg.norm(n, axis=1, keepdims=True)
-    scale = np.linalg.norm(su, axis=1, keepdims=True) * np.linalg.norm(sv, axis=1, keepdims=True)
-    return np.where(size > 1e-9 * scale, n / np.where(size > 0, size, 1.0), 0.0)
 
 
 def unwrap_corners(uv: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
