@@ -108,9 +108,12 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
         if meshing.unmeshed_faces:
             notes.append(f"{len(meshing.unmeshed_faces)} face(s) could not be meshed")
         if meshing.brep_gap > GAP_NOTE * meshing.tolerance:
+            kept = meshing.max_error <= meshing.tolerance * (1 + 1e-9)
             notes.append(f"the CAD's faces miss their shared edges by up to {meshing.brep_gap:.3g} mm: the mesh is closed "
                          "on one point per edge node and measured from every face, so the gap counts in its chordal "
-                         "error; the faces beside it were meshed finer to keep the tolerance")
+                         "error; " + ("the faces beside it were meshed finer to keep the tolerance" if kept else
+                                      "no mesh closed on those nodes keeps the tolerance there: fix the CAD's gap or "
+                                      "ask for a tolerance over twice it"))
     else:
         mesh = read_stl(path)
         info.update(STL_INFO)

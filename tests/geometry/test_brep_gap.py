@@ -78,7 +78,19 @@ def test_a_gap_wider_than_the_tolerance_is_reported_not_hidden(tmp_path):
     assert result.checks.closed
     assert meshing["within_tolerance"] is False and meshing["max_chordal_error"] > 0.01
     assert meshing["brep_gap"] == pytest.approx(0.015, rel=0.2)
-    assert any("miss their shared edges" in n for n in result.notes)
+    gap = [n for n in result.notes if "miss their shared edges" in n]
+    assert len(gap) == 1 and "no mesh closed on those nodes keeps the tolerance" in gap[0]
+    assert "meshed finer to keep the tolerance" not in gap[0]
+
+
+def test_a_gap_the_tolerance_holds_is_named_as_held(tmp_path):
+    """A round 6 µm off its planes at 10 µm: within tolerance, and the note says the faces were meshed finer for it."""
+    path = tmp_path / "gapped.brep"
+    BRepTools.Write_s(filleted_box(0.006), str(path))
+    result = convert(path, MeshParams(tolerance=0.01))
+    assert result.summary()["meshing"]["within_tolerance"] is True
+    gap = [n for n in result.notes if "miss their shared edges" in n]
+    assert len(gap) == 1 and "meshed finer to keep the tolerance" in gap[0]
 
 
 @pytest.mark.parametrize("name", ["nist_ctc02_ap242.stp", "nist_ctc02_bspline_ap203.stp"])
