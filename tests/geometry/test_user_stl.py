@@ -219,3 +219,39 @@ def test_ctc02_stl_made_within_tolerance_is_reported_within_it(tmp_path, name):
     assert al["unmatched_triangles"] == 0 and al["rms"] < 1e-3
     assert res.max_error <= 0.34
     assert a.report["chordal_error"]["max"] <= 0.34 + 1e-3
+
+
+def test_each_triangle_is_given_the_face_it_was_made_on_not_a_surface_passing_by(tmp_path):
+    """featuretype's own STL at 0.1 mm: a triangle is matched only to faces whose samples come within the tolerance
+    (and the cloud's slack) of every corner, so a plane's triangle is not given another face whose untrimmed surface
+    passes through it (19 were, before). The placement only reads the STL's float32 coordinates."""
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.io.stl import read_stl
+    from amprep.geometry.placement.place import place_user_stl
+
+    model = read_cad(corpus("featuretype_inch_ap214.step"))
+    made = mesh_model(model, MeshParams(tolerance=0.1)).mesh
+    write_stl(made, tmp_path / "own.stl")
+    placed = place_user_stl(model, read_stl(tmp_path / "own.stl"), MeshParams(tolerance=0.1))
+    assert placed.unmatched == 0
+    assert (placed.mesh.face_ids == made.face_ids).all()
+
+
+def test_a_projection_held_at_its_faces_bounds_stops_there(reference_solids):
+    """project_points stops when no point moves: a point past a face's bounds is held there (within) and its step,
+    asking to go on out, is not taken; it used to iterate to the limit. The result is the clamped foot."""
+    from dataclasses import replace
+
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.cad.surfaces import project_points, surface_of
+
+    model = model_from_shape(reference_solids["cylinder"])
+    surf = next(s for s in map(surface_of, model.faces) if s.surface_type == "cylinder")
+    calls = []
+    counted = replace(surf, evaluate=lambda uv: calls.append(len(uv)) or surf.evaluate(uv))
+    u1, u2, v1, v2 = surf.bounds
+    p = counted.evaluate(np.array([[1.0, v2 + 5.0]]))  # 5 mm past the top rim, on the cylinder's extension
+    calls.clear()
+    uv, d = project_points(counted, p, np.array([[1.0, v2 - 1.0]]), iterations=12, within=True)
+    assert abs(uv[0, 1] - v2) < 1e-6 * (v2 - v1) and d[0] == pytest.approx(5.0, abs=1e-6)
+    assert len(calls) <= 2 * 4 + 1  # two evaluations a step (point, tangents), a few steps, the final distance

@@ -84,10 +84,11 @@ def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
 
 
 def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12,
-                   within: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                   within: bool = False, settle: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Newton on |S(u,v) − p|² from uv0, all points at once, derivatives by central differences:
-    ((n, 2) (u,v), (n,) distance |S(u,v) − p|). within: each non-periodic parameter kept in the face's bounds (points
-    of the face lie there; a closed B-spline's far half, or its extrapolation past the knots, is another face's)."""
+    ((n, 2) (u,v), (n,) distance |S(u,v) − p|), stopping once no point moves by `settle` × the (u,v) extent. within:
+    each non-periodic parameter kept in the face's bounds (points of the face lie there; a closed B-spline's far
+    half, or its extrapolation past the knots, is another face's)."""
     uv = np.array(uv0, dtype=float)
     span = uv_extent(surface)
     lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
@@ -109,8 +110,9 @@ def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterat
         dv = np.where(ok, -(a * gv - b * gu) / np.where(ok, det, 1), 0.0)
         step = np.stack([du, dv], 1)
         limit = 0.25 * span  # no jumps across the domain from a bad start
-        uv = np.clip(uv + np.clip(step, -limit, limit), lo, hi)
-        if np.abs(step / span).max(initial=0) < 1e-12:
+        new = np.clip(uv + np.clip(step, -limit, limit), lo, hi)
+        moved, uv = np.abs((new - uv) / span).max(initial=0), new
+        if moved < settle:  # the step taken: a point held at its face's bounds asks to go on out, and goes nowhere
             break
     return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1)
 

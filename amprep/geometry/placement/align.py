@@ -110,7 +110,7 @@ def _icp(tree: cKDTree, cad_points: np.ndarray, pts: np.ndarray, R: np.ndarray, 
         moved = pts @ R.T + t
         near, _ = tree.query(moved[:SCORE_POINTS], distance_upper_bound=reach)
         trim = max(3 * float(np.median(np.minimum(near, reach))), inlier_distance)
-        d, idx = tree.query(moved, distance_upper_bound=trim)
+        d, idx = tree.query(moved, distance_upper_bound=trim, workers=-1)
         keep = np.isfinite(d)
         if keep.sum() < 3:
             break
@@ -123,7 +123,7 @@ def _icp(tree: cKDTree, cad_points: np.ndarray, pts: np.ndarray, R: np.ndarray, 
 
 def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float, stl_cloud: np.ndarray | None = None,
           cad_cloud: np.ndarray | None = None, min_inliers: float = 0.6, iterations: int = 40, sample: int = 20_000,
-          rng: np.random.Generator | None = None) -> Alignment:
+          rng: np.random.Generator | None = None, tree: cKDTree | None = None) -> Alignment:
     """Fit (n, 3) STL points onto a dense (p, 3) cloud on the CAD surface. Starts: the 24 axis rotations about the
     bounding-box centres (STLs turned into print orientation) and the 4 matchings of principal axes about the
     centroids (any other rotation); each is scored by the median nearest distance, the best few are refined by
@@ -132,14 +132,15 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
     ICP), so alignment costs seconds however far the STL starts and however large the part.
     rms and max are over the inliers (points within inlier_distance). stl_cloud: points spread evenly over the STL
     (for the principal axes; default its vertices), cad_cloud the same on the CAD (default cad_points, which need
-    not be spread by area: a reference cloud samples slivers and edges densely). Fewer than min_inliers of the points on the CAD: the STL does
-    not belong to it, AmprepError(stl_mismatch)."""
+    not be spread by area: a reference cloud samples slivers and edges densely); `tree` the k-d tree of cad_points when
+    the caller has one. Fewer than min_inliers of the points on the CAD: the STL does not belong to it,
+    AmprepError(stl_mismatch)."""
     rng = rng or np.random.default_rng(0)
     even = stl_cloud if stl_cloud is not None else stl_points
     # points spread evenly by area: vertices crowd on small curved features, which turn freely about their axes
     pts = even[rng.choice(len(even), min(sample, len(even)), replace=False)]
     probe = pts
-    tree = cKDTree(cad_points)
+    tree = tree if tree is not None else cKDTree(cad_points)
     starts: list[tuple[str, np.ndarray, np.ndarray]] = []
     c_cad = (cad_points.min(axis=0) + cad_points.max(axis=0)) / 2
     c_stl = (stl_points.min(axis=0) + stl_points.max(axis=0)) / 2
@@ -164,7 +165,7 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
         # coarse to fine: ICP on the scoring points until it settles, then a few rounds on the whole sample
         for cloud, rounds in ((pts[:SCORE_POINTS], iterations), (pts, FINE_ROUNDS)):
             R, t = _icp(tree, cad_points, cloud, R, t, reach, inlier_distance, rounds)
-        d, _ = tree.query(stl_points @ R.T + t, distance_upper_bound=inlier_distance * (1 + 1e-12))
+        d, _ = tree.query(stl_points @ R.T + t, distance_upper_bound=inlier_distance * (1 + 1e-12), workers=-1)
         inl = np.isfinite(d)
         fit = Alignment(R, t, float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf"),
                         float(d[inl].max(initial=0.0)), name, float(inl.mean()))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -14,26 +15,36 @@ from amprep.geometry.core.mesh import FaceInfo, Mesh
 
 @dataclass(frozen=True)
 class ReferenceCloud:
-    """Dense points on a CAD tessellation: (p, 3) xyz, (p,) face id, (p, 2) (u,v) on that face."""
+    """Dense points on a CAD tessellation: (p, 3) xyz, (p,) face id, (p, 2) (u,v) on that face; `step` the spacing
+    they were placed at, `slack` a bound on how much nearer than its nearest sample a point can be to its face (two
+    steps and the tessellation's own chordal error)."""
 
     points: np.ndarray
     face: np.ndarray
     uv: np.ndarray
+    step: float = 0.0
+    slack: float = np.inf
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """The k-d tree of the points, built once for the alignment and every isolate round."""
+        return cKDTree(self.points)
 
     @classmethod
-    def of(cls, mesh: Mesh, spacing: float, max_points: int = 4_000_000) -> ReferenceCloud:
+    def of(cls, mesh: Mesh, spacing: float, max_points: int = 4_000_000, error: float = np.inf) -> ReferenceCloud:
         """Points on every triangle of a tessellation that carries (u,v), no surface point farther than about
-        `spacing` from one (row_samples), the spacing widened when they would exceed max_points."""
+        `spacing` from one (row_samples), the spacing widened when they would exceed max_points; `error` the
+        tessellation's largest chordal error (unknown: no point is ruled out by its distance to the samples)."""
         keep = np.flatnonzero(mesh.face_ids >= 0)
-        tri, w = row_samples(mesh.corners[keep], spacing, max_points)
+        tri, w, step = row_samples(mesh.corners[keep], spacing, max_points)
         sel = keep[tri]
         pts = np.einsum("pk,pkd->pd", w, mesh.corners[sel])
         uv = np.einsum("pk,pkd->pd", w, mesh.uv[sel]) if mesh.uv is not None else np.zeros((len(sel), 2))
-        return cls(pts, mesh.face_ids[sel], uv)
+        return cls(pts, mesh.face_ids[sel], uv, step, 2 * step + error)
 
 
-def row_samples(corners: np.ndarray, spacing: float, max_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """((p,) triangle, (p, 3) barycentric weights) of points on (m, 3, 3) triangles in rows parallel to each one's
+def row_samples(corners: np.ndarray, spacing: float, max_points: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """((p,) triangle, (p, 3) barycentric weights, the spacing used) of points on (m, 3, 3) triangles in rows parallel to each one's
     longest edge, ⌈height / spacing⌉ rows (at least 2) and ⌈row length / spacing⌉ + 1 points a row (the apex one):
     a sliver 300 mm long and 1 mm high gets two rows along its length, where a barycentric grid fine enough along it
     would put (300 / spacing)² / 2 points on it. Spacing widened by √(count / max_points) while over max_points."""
@@ -63,7 +74,7 @@ def row_samples(corners: np.ndarray, spacing: float, max_points: int) -> tuple[n
     w[np.arange(total), a] = (1 - fr) * (1 - g)
     w[np.arange(total), (a + 1) % 3] = (1 - fr) * g
     w[np.arange(total), (a + 2) % 3] = fr
-    return tri, w
+    return tri, w, step
 
 
 def unwrap_corners(uv: np.ndarray, periods: tuple[float | None, float | None]) -> np.ndarray:
@@ -102,10 +113,18 @@ def with_free_corners_centred(mesh: Mesh, surfaces: dict[int, Surface], snap: fl
     return mesh.with_arrays(uv=uv)
 
 
+#: projections stop once no point moves by this × the face's (u,v) extent: a corner on its surface converges
+#: quadratically and is then exact to rounding, a centroid off it (by the triangle's sag) converges linearly to a noise
+#: floor of about 1e-11 set by the difference steps, and its distance, at a minimum, errs by the square of the rest
+SETTLE = 1e-9
+
+
 def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
-                   trees: dict[int, tuple[np.ndarray, cKDTree]]) -> tuple[np.ndarray, np.ndarray]:
+                   trees: dict[int, tuple[np.ndarray, cKDTree]], tolerance: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
     """((m, k, 2) uv, (m, k) distance) of each triangle's k points (m, k, 3) (its corners, then its centroid)
-    projected on the surface of its given face, the periodic parameters unwrapped together (unwrap_corners)."""
+    projected on the surface of its given face, the periodic parameters unwrapped together (unwrap_corners); a
+    triangle with a corner farther than `tolerance` + the cloud's slack from every sample of the face cannot be within
+    `tolerance` of it and is not projected (distance inf)."""
     m, k = points.shape[:2]
     uv = np.zeros((m, k, 2))
     dist = np.full((m, k), np.inf)
@@ -118,9 +137,12 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
             trees[int(fid)] = (own, cKDTree(cloud.points[own]))
         own, tree = trees[int(fid)]
         tris = np.flatnonzero(face == fid)
-        pts = points[tris].reshape(-1, 3)
-        _, near = tree.query(pts)  # start each point at the nearest sample of the same face
-        p_uv, d = project_points(surf, pts, cloud.uv[own[near]], within=True)
+        apart, near = tree.query(points[tris].reshape(-1, 3))  # start each point at the nearest sample of the face
+        reachable = (apart.reshape(-1, k)[:, :3] <= tolerance + cloud.slack).all(axis=1)
+        tris, near = tris[reachable], near.reshape(-1, k)[reachable].ravel()
+        if not len(tris):
+            continue
+        p_uv, d = project_points(surf, points[tris].reshape(-1, 3), cloud.uv[own[near]], within=True, settle=SETTLE)
         uv[tris] = unwrap_corners(p_uv.reshape(-1, k, 2), surf.periods)
         dist[tris] = d.reshape(-1, k)
     return uv, dist
@@ -133,7 +155,7 @@ def nearest_faces(cloud: ReferenceCloud, corners: np.ndarray, k: int) -> np.ndar
     mids = 0.5 * (corners + np.roll(corners, -1, axis=1))
     points = np.concatenate([corners.mean(axis=1, keepdims=True), mids], axis=1)  # (m, 4, 3)
     each = -(-k // points.shape[1])
-    dist, near = cKDTree(cloud.points).query(points.reshape(-1, 3), k=each)
+    dist, near = cloud.tree.query(points.reshape(-1, 3), k=each)
     dist, near = dist.reshape(len(corners), -1), near.reshape(len(corners), -1)
     order = np.argsort(dist, axis=1, kind="stable")
     return cloud.face[np.take_along_axis(near, order, axis=1)]
@@ -183,7 +205,7 @@ def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], fac
         pick = nf[has][np.arange(len(todo)), np.argmax(fresh[has], axis=1)]
         tried = np.concatenate([tried, np.full((m, 1), -2, np.int64)], axis=1)
         tried[todo, -1] = pick
-        p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, trees)
+        p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, trees, tolerance)
         through = d[:, :3].max(axis=1) <= snap
         new = np.stack([np.where(through, 0.0, 1.0), np.where(through, d[:, 3], d.max(axis=1))], axis=1)
         old = rank[todo]
