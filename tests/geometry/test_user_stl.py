@@ -255,3 +255,31 @@ def test_a_projection_held_at_its_faces_bounds_stops_there(reference_solids):
     uv, d = project_points(counted, p, np.array([[1.0, v2 - 1.0]]), iterations=12, within=True)
     assert abs(uv[0, 1] - v2) < 1e-6 * (v2 - v1) and d[0] == pytest.approx(5.0, abs=1e-6)
     assert len(calls) <= 2 * 4 + 1  # two evaluations a step (point, tangents), a few steps, the final distance
+
+
+def test_a_projection_thrown_off_an_apex_starts_again_from_other_samples():
+    """CTC-02's B-spline twin has ruled B-spline faces with an apex along u = 0 (face 304). Gauss–Newton from (0.3, 2.7)
+    toward a point 0.34 mm from that apex lands on it, where S_v = 0, and the next step throws it back: it bounces
+    between the two for every iteration and ends 0.43 mm off a point that lies on the face (the twin's own STL at
+    0.1 mm by the quality mesher was reported at 1.26 × the error it was made with). Such a point starts again from
+    its next nearest samples, and the nearest foot is kept."""
+    from scipy.spatial import cKDTree
+
+    from amprep.geometry.cad.read import read_cad
+    from amprep.geometry.cad.surfaces import project_settled, surface_of
+    from amprep.geometry.placement.project import _from_samples
+
+    model = read_cad(corpus("nist_ctc02_bspline_ap203.stp"))
+    surf = surface_of(model.faces[304])
+    assert surf.data is not None and surf.data["udeg"] == 1
+    assert np.ptp(surf.evaluate(np.array([[0.0, 0.0], [0.0, 1.5], [0.0, 3.1]])), axis=0).max() < 1e-9  # the apex
+    p = surf.evaluate(np.array([[0.342048, 0.676822]]))
+    _, dist, settled = project_settled(surf, p, np.array([[0.3, 2.7]]), within=True, settle=1e-9)
+    assert not settled[0] and dist[0] > 0.3
+    starts = np.array([[0.3, 2.7], [0.8, 3.0], [1.0, 2.35]])
+    samples = surf.evaluate(starts)
+    tree = cKDTree(samples)
+    near = tree.query(p)[1]
+    assert near[0] == 0  # the bad start is the nearest sample
+    uv, dist = _from_samples(surf, p, near, np.arange(3), tree, starts)
+    assert dist[0] < 1e-6 and np.abs(uv[0] - [0.342048, 0.676822]).max() < 1e-4

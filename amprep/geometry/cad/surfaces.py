@@ -89,7 +89,16 @@ def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterat
     ((n, 2) (u,v), (n,) distance |S(u,v) − p|), stopping once no point moves by `settle` × the (u,v) extent. within:
     each non-periodic parameter kept in the face's bounds (points of the face lie there; a closed B-spline's far
     half, or its extrapolation past the knots, is another face's)."""
+    uv, dist, _ = project_settled(surface, points, uv0, iterations, within, settle)
+    return uv, dist
+
+
+def project_settled(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12,
+                    within: bool = False, settle: float = 1e-12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """project_points' ((n, 2) uv, (n,) distance) and (n,) bool: the points whose last step moved them by under
+    `settle` × the extent (the others ran out of iterations: bouncing off an apex the bounds hold them at, say)."""
     uv = np.array(uv0, dtype=float)
+    last = np.zeros(len(uv))
     span = uv_extent(surface)
     lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
     if within and surface.bounds is not None:
@@ -111,10 +120,10 @@ def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterat
         step = np.stack([du, dv], 1)
         limit = 0.25 * span  # no jumps across the domain from a bad start
         new = np.clip(uv + np.clip(step, -limit, limit), lo, hi)
-        moved, uv = np.abs((new - uv) / span).max(initial=0), new
-        if moved < settle:  # the step taken: a point held at its face's bounds asks to go on out, and goes nowhere
+        last, uv = np.abs((new - uv) / span).max(axis=1, initial=0), new
+        if last.max(initial=0) < settle:  # the step taken: a point held at its face's bounds asks to go on out
             break
-    return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1)
+    return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1), last < settle
 
 
 def plane(o: np.ndarray, x: np.ndarray, y: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:

@@ -220,13 +220,17 @@ def _unit_normals(corners: np.ndarray) -> np.ndarray:
 
 def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t1, k1, t2, k2): triangle t1's side k1 (corners k1, k1+1) is triangle t2's side k2, for every shared side."""
-    t = np.repeat(np.arange(len(tris)), 3)
-    k = np.tile(np.arange(3), len(tris))
     code = edge_codes(tris, n).ravel()  # row t·3 + k: side k of triangle t
-    order = np.argsort(code, kind="stable")
-    pair = np.flatnonzero(code[order][1:] == code[order][:-1])
+    m = len(code)
+    if m and n * n * m < 2**62:  # code and row in one int64: a plain sort, the stable argsort's order
+        packed = np.sort(code * m + np.arange(m))
+        order, ordered = packed % m, packed // m
+    else:
+        order = np.argsort(code, kind="stable")
+        ordered = code[order]
+    pair = np.flatnonzero(ordered[1:] == ordered[:-1])
     first, second = order[pair], order[pair + 1]
-    return t[first], k[first], t[second], k[second]
+    return first // 3, first % 3, second // 3, second % 3
 
 
 def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6,
@@ -251,8 +255,7 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         new1, new2 = np.stack([a, tris[t2, (k2 + 2) % 3], c], axis=1), np.stack([tris[t2, (k2 + 2) % 3], b, c], axis=1)
         angle1, angle2 = min_angles(xyz[new1]), min_angles(xyz[new2])
         gain = np.minimum(angle1, angle2) - np.minimum(angle[t1], angle[t2])
-        normal = _unit_normals(xyz[tris])
-        fold_old = np.einsum("ij,ij->i", normal[t1], normal[t2])
+        fold_old = np.einsum("ij,ij->i", _unit_normals(xyz[tris[t1]]), _unit_normals(xyz[tris[t2]]))
         fold_new = np.einsum("ij,ij->i", _unit_normals(xyz[new1]), _unit_normals(xyz[new2]))
         # a pair folded against each other in space is unfolded first, whatever the angles; no flip folds a pair
         repair = (fold_old < FOLD_COS) & (fold_new > fold_old)
@@ -323,6 +326,13 @@ def _independent(candidates: np.ndarray, sides: np.ndarray, priority: np.ndarray
     return candidates & ~blocked
 
 
+def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """The integers of the ranges [start_i, stop_i) (k,) each, concatenated."""
+    count = stop - start
+    offset = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    return np.repeat(start, count) + offset
+
+
 def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6) -> FacePatch:
     """The quality mesher's finish of a face with no single scale to its (u,v) lengths: up to SMOOTH_ROUNDS rounds (until
     one gains under SMOOTH_GAIN in the mean smallest angle) in which
@@ -341,6 +351,9 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
     sign = np.sign(_signed_area2(uv, tris))
     angle = min_angles(xyz[tris])
     priority = (np.arange(n, dtype=np.uint64) * np.uint64(2654435761)) % np.uint64(2**32)  # a fixed scatter
+    corner_order = np.argsort(tris.ravel(), kind="stable")  # each node's triangles, node by node
+    first = np.searchsorted(tris.ravel()[corner_order], np.arange(n + 1))
+    trial_uv, trial_xyz = uv.copy(), xyz.copy()  # the state with this set's movers moved; equal to it between sets
     for _ in range(SMOOTH_ROUNDS):
         before = angle.mean()
         candidates = free.copy()
@@ -350,10 +363,9 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
                 break
             candidates &= ~movers
             idx = np.flatnonzero(movers)
-            trial_uv, trial_xyz = uv.copy(), xyz.copy()
             trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, sides, patch.uv)
             trial_xyz[idx] = surface.evaluate(trial_uv[idx])
-            star = np.flatnonzero(movers[tris].any(axis=1))
+            star = np.unique(corner_order[_ranges(first[idx], first[idx + 1])] // 3)  # triangles holding a mover
             t = tris[star]
             owner = t[np.arange(len(t)), movers[t].argmax(axis=1)]  # the one moving node of each
             new_angle = min_angles(trial_xyz[t])
@@ -368,6 +380,8 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
                                                     affine=surface.affine, stop=tolerance)
             keep[owner[new_err > tolerance]] = False
             uv[keep], xyz[keep] = trial_uv[keep], trial_xyz[keep]
+            back = idx[~keep[idx]]
+            trial_uv[back], trial_xyz[back] = uv[back], xyz[back]
             took = keep[owner]
             angle[star[took]], err[star[took]] = new_angle[took], new_err[took]
         if angle.mean() - before < SMOOTH_GAIN:

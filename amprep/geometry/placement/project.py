@@ -8,7 +8,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-from amprep.geometry.cad.surfaces import Surface, project_points
+from amprep.geometry.cad.surfaces import Surface, project_settled
 from amprep.geometry.core.checks import triangle_areas
 from amprep.geometry.core.mesh import FaceInfo, Mesh
 
@@ -117,6 +117,8 @@ def with_free_corners_centred(mesh: Mesh, surfaces: dict[int, Surface], snap: fl
 #: quadratically and is then exact to rounding, a centroid off it (by the triangle's sag) converges linearly to a noise
 #: floor of about 1e-11 set by the difference steps, and its distance, at a minimum, errs by the square of the rest
 SETTLE = 1e-9
+#: further starts (the next nearest samples of the face) for a point whose projection did not settle
+RESTARTS = 3
 
 
 def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
@@ -142,9 +144,28 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
         tris, near = tris[reachable], near.reshape(-1, k)[reachable].ravel()
         if not len(tris):
             continue
-        p_uv, d = project_points(surf, points[tris].reshape(-1, 3), cloud.uv[own[near]], within=True, settle=SETTLE)
+        p_uv, d = _from_samples(surf, points[tris].reshape(-1, 3), near, own, tree, cloud.uv)
         uv[tris] = unwrap_corners(p_uv.reshape(-1, k, 2), surf.periods)
         dist[tris] = d.reshape(-1, k)
+    return uv, dist
+
+
+def _from_samples(surf: Surface, pts: np.ndarray, near: np.ndarray, own: np.ndarray, tree: cKDTree,
+                  sample_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((n, 2) uv, (n,) distance) of points (n, 3) projected on a face's surface from the (u,v) of their nearest
+    samples `near` (n,) (indices into the face's samples `own`, held in `tree`); a point that has not settled (a full
+    step from an apex the face's bounds hold it at throws it back where it came from) starts again from each of its
+    next RESTARTS nearest samples, and the nearest foot found is kept."""
+    uv, dist, settled = project_settled(surf, pts, sample_uv[own[near]], within=True, settle=SETTLE)
+    again = np.flatnonzero(~settled)
+    k = min(RESTARTS + 1, len(own))
+    if not len(again) or k < 2:
+        return uv, dist
+    _, alt = tree.query(pts[again], k=k)
+    for j in range(1, k):
+        a_uv, a_dist, _ = project_settled(surf, pts[again], sample_uv[own[alt[:, j]]], within=True, settle=SETTLE)
+        better = a_dist < dist[again]
+        uv[again[better]], dist[again[better]] = a_uv[better], a_dist[better]
     return uv, dist
 
 
