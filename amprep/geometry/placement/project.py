@@ -144,20 +144,21 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
         tris, near = tris[reachable], near.reshape(-1, k)[reachable].ravel()
         if not len(tris):
             continue
-        p_uv, d = _from_samples(surf, points[tris].reshape(-1, 3), near, own, tree, cloud.uv)
+        p_uv, d = _from_samples(surf, points[tris].reshape(-1, 3), near, own, tree, cloud.uv, tolerance)
         uv[tris] = unwrap_corners(p_uv.reshape(-1, k, 2), surf.periods)
         dist[tris] = d.reshape(-1, k)
     return uv, dist
 
 
 def _from_samples(surf: Surface, pts: np.ndarray, near: np.ndarray, own: np.ndarray, tree: cKDTree,
-                  sample_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                  sample_uv: np.ndarray, tolerance: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
     """((n, 2) uv, (n,) distance) of points (n, 3) projected on a face's surface from the (u,v) of their nearest
     samples `near` (n,) (indices into the face's samples `own`, held in `tree`); a point that has not settled (a full
-    step from an apex the face's bounds hold it at throws it back where it came from) starts again from each of its
-    next RESTARTS nearest samples, and the nearest foot found is kept."""
+    step from an apex the face's bounds hold it at throws it back where it came from) within `tolerance` of the
+    surface, where the face would take it with that (u,v), starts again from each of its next RESTARTS nearest
+    samples, and the nearest foot found is kept (most points that do not settle are far off a face tried for them)."""
     uv, dist, settled = project_settled(surf, pts, sample_uv[own[near]], within=True, settle=SETTLE)
-    again = np.flatnonzero(~settled)
+    again = np.flatnonzero(~settled & (dist <= tolerance))
     k = min(RESTARTS + 1, len(own))
     if not len(again) or k < 2:
         return uv, dist
