@@ -107,7 +107,7 @@ def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], fa
 
     from amprep.geometry.cad.surfaces import surface_normals
     from amprep.geometry.placement.align import point_to_plane
-    from amprep.geometry.placement.project import isolate, with_free_corners_centred
+    from amprep.geometry.placement.project import RESTARTS, isolate, with_free_corners_centred
 
     # the polish matches within the coarse fit's reach too: ICP on area samples of a coarse STL sits its facets, not
     # its corners, on the surface (a 0.5 mm STL of a 12 mm cone: 0.07 mm off, no corner within tol)
@@ -137,7 +137,7 @@ def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], fa
         if turn + np.linalg.norm(dt) <= SETTLED * diag:
             break  # no corner moved by more than that: the rounds after it move them by rounding noise
     placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
-    scored, dist = isolate(placed, cloud, surfaces, faces, tol, snap)
+    scored, dist = isolate(placed, cloud, surfaces, faces, tol, snap, restarts=RESTARTS)
     # a pole's free parameter, wherever its projection left it, would fold its triangles' (u,v)
     scored = with_free_corners_centred(scored, surfaces, snap)
     d_ok = dist[scored.face_ids >= 0]

@@ -122,11 +122,12 @@ RESTARTS = 3
 
 
 def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
-                   trees: dict[int, tuple[np.ndarray, cKDTree]], tolerance: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+                   trees: dict[int, tuple[np.ndarray, cKDTree]], tolerance: float = np.inf,
+                   restarts: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """((m, k, 2) uv, (m, k) distance) of each triangle's k points (m, k, 3) (its corners, then its centroid)
     projected on the surface of its given face, the periodic parameters unwrapped together (unwrap_corners); a
     triangle with a corner farther than `tolerance` + the cloud's slack from every sample of the face cannot be within
-    `tolerance` of it and is not projected (distance inf)."""
+    `tolerance` of it and is not projected (distance inf); `restarts` as _from_samples'."""
     m, k = points.shape[:2]
     uv = np.zeros((m, k, 2))
     dist = np.full((m, k), np.inf)
@@ -144,22 +145,22 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
         tris, near = tris[reachable], near.reshape(-1, k)[reachable].ravel()
         if not len(tris):
             continue
-        p_uv, d = _from_samples(surf, points[tris].reshape(-1, 3), near, own, tree, cloud.uv, tolerance)
+        p_uv, d = _from_samples(surf, points[tris].reshape(-1, 3), near, own, tree, cloud.uv, tolerance, restarts)
         uv[tris] = unwrap_corners(p_uv.reshape(-1, k, 2), surf.periods)
         dist[tris] = d.reshape(-1, k)
     return uv, dist
 
 
 def _from_samples(surf: Surface, pts: np.ndarray, near: np.ndarray, own: np.ndarray, tree: cKDTree,
-                  sample_uv: np.ndarray, tolerance: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+                  sample_uv: np.ndarray, tolerance: float = np.inf, restarts: int = RESTARTS) -> tuple[np.ndarray, np.ndarray]:
     """((n, 2) uv, (n,) distance) of points (n, 3) projected on a face's surface from the (u,v) of their nearest
     samples `near` (n,) (indices into the face's samples `own`, held in `tree`); a point that has not settled (a full
     step from an apex the face's bounds hold it at throws it back where it came from) within `tolerance` of the
-    surface, where the face would take it with that (u,v), starts again from each of its next RESTARTS nearest
+    surface, where the face would take it with that (u,v), starts again from each of its next `restarts` nearest
     samples, and the nearest foot found is kept (most points that do not settle are far off a face tried for them)."""
     uv, dist, settled = project_settled(surf, pts, sample_uv[own[near]], within=True, settle=SETTLE)
     again = np.flatnonzero(~settled & (dist <= tolerance))
-    k = min(RESTARTS + 1, len(own))
+    k = min(restarts + 1, len(own))
     if not len(again) or k < 2:
         return uv, dist
     _, alt = tree.query(pts[again], k=k)
@@ -190,7 +191,7 @@ ON_SURFACE = 0.02
 
 
 def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], faces: tuple[FaceInfo, ...],
-            tolerance: float, snap: float = 0.0, candidates: int = 6) -> tuple[Mesh, np.ndarray]:
+            tolerance: float, snap: float = 0.0, candidates: int = 6, restarts: int = 0) -> tuple[Mesh, np.ndarray]:
     """Give each triangle of a (CAD-frame) mesh the CAD face it tessellates: the faces of the samples nearest its
     centroid and edge midpoints are tried in order, the corners and centroid projected on each face's surface; of the
     faces with every corner within `tolerance` of their surface, one through all three corners (within `snap`: a
@@ -200,7 +201,9 @@ def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], fac
     centroid does); the centroid alone gives a fillet's triangle to the plane it is tangent to, whose untrimmed surface
     passes nearer the centroid than the triangle's own sag while its far corner lies off that plane. The search stops
     at a face through the corners whose surface passes within ON_SURFACE × the triangle's smallest height of the
-    centroid. Returns the mesh with face_ids, uv and faces, and (m, 3) corner distances to the chosen face's surface."""
+    centroid. `restarts`: further starts for a projection that does not settle (_from_samples; the final isolation
+    asks for them, the polish rounds, whose far corners are trimmed, do not). Returns the mesh with face_ids, uv and
+    faces, and (m, 3) corner distances to the chosen face's surface."""
     corners = mesh.corners
     m = len(corners)
     points = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)  # (m, 4, 3)
@@ -227,7 +230,7 @@ def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], fac
         pick = nf[has][np.arange(len(todo)), np.argmax(fresh[has], axis=1)]
         tried = np.concatenate([tried, np.full((m, 1), -2, np.int64)], axis=1)
         tried[todo, -1] = pick
-        p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, trees, tolerance)
+        p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, trees, tolerance, restarts)
         through = d[:, :3].max(axis=1) <= snap
         new = np.stack([np.where(through, 0.0, 1.0), np.where(through, d[:, 3], d.max(axis=1))], axis=1)
         old = rank[todo]
