@@ -66,7 +66,7 @@ class ConvertResult:
             out["meshing"] = {
                 "tolerance": m.tolerance,
                 "max_chordal_error": m.max_error,
-                "within_tolerance": bool(m.max_error <= m.tolerance * (1 + 1e-9)) if m.max_error == m.max_error else None,
+                "within_tolerance": m.within_tolerance,
                 "fallback_faces": {str(k): v for k, v in sorted(m.fallback_faces.items()) if v != "quality"},
                 "faces_by_method": dict(sorted(Counter(f.meshed_by for f in m.mesh.faces).items())),
                 "unmeshed_faces": list(m.unmeshed_faces),
@@ -76,7 +76,7 @@ class ConvertResult:
         return out
 
 
-#: a B-rep gap above this × the tolerance is named in the notes (the faces beside it are meshed finer to keep it)
+#: a B-rep gap above this × the tolerance is named in the notes, with whether the faces beside it kept the tolerance
 GAP_NOTE = 0.1
 
 #: output checks of a mesh this large run beside manifold3d's in a forked child (forking costs ~10 ms)
@@ -108,10 +108,9 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
         if meshing.unmeshed_faces:
             notes.append(f"{len(meshing.unmeshed_faces)} face(s) could not be meshed")
         if meshing.brep_gap > GAP_NOTE * meshing.tolerance:
-            kept = meshing.max_error <= meshing.tolerance * (1 + 1e-9)
             notes.append(f"the CAD's faces miss their shared edges by up to {meshing.brep_gap:.3g} mm: the mesh is closed "
                          "on one point per edge node and measured from every face, so the gap counts in its chordal "
-                         "error; " + ("the faces beside it were meshed finer to keep the tolerance" if kept else
+                         "error; " + ("the faces beside it were meshed finer to keep the tolerance" if meshing.within_tolerance else
                                       "no mesh closed on those nodes keeps the tolerance there: fix the CAD's gap or "
                                       "ask for a tolerance over twice it"))
     else:

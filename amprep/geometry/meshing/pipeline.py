@@ -53,6 +53,12 @@ class MeshResult:
         e = self.face_error[np.isfinite(self.face_error)]
         return float(e.max()) if len(e) else float("nan")
 
+    @property
+    def within_tolerance(self) -> bool | None:
+        """max_error ≤ tolerance (to 1e-9 of it); None when no face has a surface to measure against."""
+        e = self.max_error
+        return bool(e <= self.tolerance * (1 + 1e-9)) if e == e else None
+
 
 def mesh_file(path: str | Path, fmt: str, params: MeshParams = MeshParams(),
               progress: ProgressFn | None = None) -> tuple[CadModel, MeshResult]:

@@ -81,7 +81,7 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
     surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
     prog("isolating faces", 0.8)
     # each round projects every corner on its candidate faces, a few points per call: B-splines by the compiled
-    # evaluator when the part has any and the STL is large enough (decided by the input, not by what is loaded)
+    # evaluator where _worth_compiling says (decided by the input, not by what is loaded)
     with compiled(_worth_compiling(user, surfaces)):
         scored, fit = _polished(user, fit, cloud, surfaces, reference.mesh.faces, tol, spacing, diag)
     prog("placed", 1.0)

@@ -15,14 +15,13 @@ from amprep.geometry.core.mesh import FaceInfo, Mesh
 
 @dataclass(frozen=True)
 class ReferenceCloud:
-    """Dense points on a CAD tessellation: (p, 3) xyz, (p,) face id, (p, 2) (u,v) on that face; `step` the spacing
-    they were placed at, `slack` a bound on how much nearer than its nearest sample a point can be to its face (two
-    steps and the tessellation's own chordal error)."""
+    """Dense points on a CAD tessellation: (p, 3) xyz, (p,) face id, (p, 2) (u,v) on that face; `slack` a bound on
+    how much nearer than its nearest sample a point can be to its face (two steps of the spacing the points were
+    placed at, and the tessellation's own chordal error)."""
 
     points: np.ndarray
     face: np.ndarray
     uv: np.ndarray
-    step: float = 0.0
     slack: float = np.inf
 
     @cached_property
@@ -40,7 +39,7 @@ class ReferenceCloud:
         sel = keep[tri]
         pts = np.einsum("pk,pkd->pd", w, mesh.corners[sel])
         uv = np.einsum("pk,pkd->pd", w, mesh.uv[sel]) if mesh.uv is not None else np.zeros((len(sel), 2))
-        return cls(pts, mesh.face_ids[sel], uv, step, 2 * step + error)
+        return cls(pts, mesh.face_ids[sel], uv, 2 * step + error)
 
 
 def row_samples(corners: np.ndarray, spacing: float, max_points: int) -> tuple[np.ndarray, np.ndarray, float]:
