@@ -35,7 +35,7 @@ from amprep.geometry.meshing.shared_edges import (
     has_pole,
     split_edge_to_tolerance,
 )
-from amprep.geometry.meshing.uv_cdt import MIN_SPACING
+from amprep.geometry.meshing.uv_cdt import MIN_SPACING, crossing_segments
 from amprep.geometry.meshing.weld import BrepGaps, seat_boundaries
 from amprep.geometry.parallel.face_pool import SharedCount, map_faces
 
@@ -64,6 +64,8 @@ CLOSED_EDGE_SEGMENTS = 3
 #: a face or edge the B-rep's gap g leaves its boundary off its surface (weld.seat_boundaries) is meshed to the target less g, to no
 #: less than this × the target: a gap near the tolerance is reported, not chased into ever smaller triangles
 GAP_FLOOR = 0.25
+#: rounds in which a face whose discretised boundary crosses itself has the crossing segments split (_uncross)
+UNCROSS_ROUNDS = 6
 
 
 @dataclass
@@ -108,6 +110,10 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
         stage = Progress(progress, 0.5 + 0.08 * round_, 0.58 + 0.08 * round_)
         stage("re-meshing faces", 0.0)
         _remesh(f, todo)
+        uncrossed = _uncross(f)
+        todo |= uncrossed
+        for i in uncrossed:  # OCCT's mesh of these was measured by occt_check: they are ours now
+            first_error.pop(i, None)
         moved = seat_boundaries(f.patches, f.surfaces, f.topo.vertex_roots(), f.tol, f.gaps)
         _measure(f, round_, todo, first_error, stage)
         _measure_moved(f, moved)
@@ -177,8 +183,48 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         meshed = _costliest_first(remesh_face, remesh, f.patches, f.errors, target, f.expected)
     for i, patch in meshed.items():
         f.patches[i] = patch
-        if patch is None:
-            f.unmeshed.append(i)
+    f.unmeshed = sorted({i for i in f.unmeshed if f.patches[i] is None} | {i for i, p in meshed.items() if p is None})
+
+
+def _uncross(f: FaceStates) -> set[int]:
+    """Mesh again the faces left unmeshed because their discretised boundary crosses itself in (u,v) (two edges that
+    meet at a small angle, each a chord off its curve, cross there): the crossing segments split at their middle
+    parameter, every face of a split edge meshed again, up to UNCROSS_ROUNDS times; returns the faces meshed again."""
+    redone: set[int] = set()
+    for _ in range(UNCROSS_ROUNDS):
+        split: set[int] = set()
+        for i in f.unmeshed:
+            if f.surfaces[i] is not None:
+                split |= _split_crossings(f, i)
+        if not split:
+            break
+        faces = set().union(*(_faces_of_edge(f.model, f.topo, e) for e in split))
+        for i in faces:
+            f.fallback.setdefault(i, "boundary_crossing")
+        _remesh(f, faces)
+        redone |= faces
+    return redone
+
+
+def _split_crossings(f: FaceStates, i: int) -> set[int]:
+    """The edges of face i split at the middle parameter of each of their segments that crosses another in (u,v)
+    (uv_cdt.crossing_segments); returns those edges."""
+    try:
+        loops = boundary_loops(f.model.faces[i], f.topo, f.tol * ENFORCE_MARGIN, f.params.angular)
+    except AmprepError:
+        return set()
+    if not loops:
+        return set()
+    hit = crossing_segments([lp["uv"] for lp in loops])
+    edges = np.concatenate([lp["segment"] for lp in loops])[hit]
+    spans = np.concatenate([lp["span"] for lp in loops])[hit]
+    keep = spans[:, 0] != spans[:, 1]
+    split: set[int] = set()
+    for e in np.unique(edges[keep]).tolist():
+        mids = spans[keep & (edges == e)].mean(axis=1)
+        f.topo.edge_params[e] = np.unique(np.concatenate([f.topo.edge_params[e], mids]))
+        split.add(e)
+    return split
 
 
 def less_gap(target: float, gap: float) -> float:

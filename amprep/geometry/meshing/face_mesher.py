@@ -72,12 +72,13 @@ def wire_edges(face: TopoDS_Face, wire) -> list[TopoDS_Edge]:  # type: ignore[no
 
 
 def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
-    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,), and segment
-    (n,) the B-rep edge of the segment from each node to the next; an edge with no discretisation yet gets one."""
+    """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,), segment
+    (n,) the B-rep edge of the segment from each node to the next and span (n, 2) its parameters there at both ends;
+    an edge with no discretisation yet gets one."""
     discretize_missing_edges(face, topo, tolerance, angular)
     loops = []
     for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
-        uvs, verts, edges, pars, segs = [], [], [], [], []
+        uvs, verts, edges, pars, segs, spans = [], [], [], [], [], []
         for edge in wire_edges(face, wire):
             ei = topo.edge_index(edge)
             degenerate = BRep_Tool.Degenerated_s(edge)
@@ -101,9 +102,10 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             edges.append(np.where(vtx >= 0, -1, ei))
             pars.append(np.where(vtx >= 0, np.nan, params[:n]))
             segs.append(np.full(n, ei, np.int64))
+            spans.append(np.stack([params[:n], params[1:n + 1]], axis=1))
         if uvs:
-            loops.append(dict(uv=np.array(uvs, float), vertex=np.concatenate(verts),
-                              edge=np.concatenate(edges), param=np.concatenate(pars), segment=np.concatenate(segs)))
+            loops.append(dict(uv=np.array(uvs, float), vertex=np.concatenate(verts), edge=np.concatenate(edges),
+                              param=np.concatenate(pars), segment=np.concatenate(segs), span=np.concatenate(spans)))
     return loops
 
 

@@ -76,12 +76,16 @@ def _plane_errors(patches: Sequence[FacePatch], surfaces: Sequence[Surface]) -> 
     return np.split(err, np.cumsum([len(p.tris) for p in patches])[:-1])
 
 
-def rejected(patches: Sequence[FacePatch], min_area: float) -> list[str | None]:
+def rejected(patches: Sequence[FacePatch], min_area: float,
+             segments: Sequence[np.ndarray] | None = None) -> list[str | None]:
     """Why each of OCCT's patches cannot be kept, checked on all their triangles at once: "broken_triangulation"
-    (check_patch_boundary fails), "degenerate_triangles" (flat_triangles finds one), or None."""
+    (check_patch_boundary fails, given each patch's edge polygon `segments` (s, 2) when known), "degenerate_triangles"
+    (flat_triangles finds one), or None."""
     stacked, owner, offsets = stack_patches(patches)
+    joined = (np.concatenate([s + o for s, o in zip(segments, offsets, strict=False)]) if segments is not None
+              else None)
     broken = np.zeros(len(patches), bool)
-    broken[np.searchsorted(offsets, off_boundary_edges(stacked)[:, 0], side="right") - 1] = True
+    broken[np.searchsorted(offsets, off_boundary_edges(stacked, joined)[:, 0], side="right") - 1] = True
     flat = np.bincount(owner, flat_triangles(stacked, min_area), minlength=len(patches)) > 0
     return ["broken_triangulation" if b else "degenerate_triangles" if f else None for b, f in zip(broken, flat, strict=True)]
 
@@ -98,7 +102,9 @@ def _look_at(faces: Sequence[TopoDS_Face], ids: range, topo: Topology, bulk: Seq
         looks[i] = Look(found, None if found.patch is not None else "no_triangulation", None)
     occt = [i for i in ids if looks[i].patch is not None and not looks[i].found.stored]
     if occt:
-        for i, reason in zip(occt, rejected([looks[i].found.patch for i in occt], min_area), strict=True):  # type: ignore[misc]
+        reasons = rejected([looks[i].found.patch for i in occt], min_area,  # type: ignore[misc]
+                           [looks[i].found.segments for i in occt])
+        for i, reason in zip(occt, reasons, strict=True):
             looks[i].reason = reason
     kept = [i for i in ids if looks[i].patch is not None]
     planes = [i for i in kept if _on_plane(looks[i].patch, surfaces[i])]  # type: ignore[arg-type]

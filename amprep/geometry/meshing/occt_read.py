@@ -101,7 +101,8 @@ class PatchRead:
     (`keys`: node ids, B-rep vertex, B-rep edge, parameter on it, (b,) each; None when the face has no or a broken
     triangulation), each B-rep edge's discretisation (`edges` (e,) indices, `sizes` (e,), `params` (Σ sizes,) in
     the polygons' order), the B-rep vertex pairs BRepMesh collapsed into one node (an edge shorter than its min
-    size), and `stored` for a tessellated-only face. `patch`, the assembled FacePatch, stays in its process."""
+    size), and `stored` for a tessellated-only face. `patch`, the assembled FacePatch, and `segments` (s, 2), the
+    node pairs along each edge polygon (poles too), stay in its process."""
 
     face_id: int
     keys: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -111,9 +112,10 @@ class PatchRead:
     merges: list[tuple[int, int]] = field(default_factory=list)
     stored: bool = False
     patch: FacePatch | None = None
+    segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
 
     def __getstate__(self) -> dict:  # type: ignore[type-arg]
-        return {**self.__dict__, "patch": None}
+        return {**self.__dict__, "patch": None, "segments": np.zeros((0, 2), np.int64)}
 
     def record(self, topo: Topology) -> None:
         """Add the edges' discretisations (sorted, where topo has none yet) and the collapses to the topology."""
@@ -171,7 +173,7 @@ def read_patch(face_id: int, face: TopoDS_Face, topo: Topology,
     has_surface = BRep_Tool.Surface_s(face) is not None
     ids: list[int] = []  # 1-based polygon nodes of every edge, one after the other
     par: list[float] = []
-    facts, sizes, pole_nodes, pole_vertex = [], [], [], []
+    facts, sizes, pole_nodes, pole_vertex, polygon_sizes = [], [], [], [], []
     for edge in face_edges(face):
         poly = BRep_Tool.PolygonOnTriangulation_s(edge, tri, loc)
         if poly is None:
@@ -185,11 +187,13 @@ def read_patch(face_id: int, face: TopoDS_Face, topo: Topology,
         if fact[5]:  # degenerated: a pole, all its nodes on the vertex
             pole_nodes.extend(poly.Node(i) for i in range(1, n + 1))
             pole_vertex.extend([fact[1]] * n)
+            polygon_sizes.append(-n)
             continue
         ids.extend([poly.Node(i) for i in range(1, n + 1)])
         par.extend([poly.Parameter(i) for i in range(1, n + 1)])
         facts.append(fact)
         sizes.append(n)
+        polygon_sizes.append(n)
     node_ids = np.array(ids, dtype=np.int64) - 1
     poles = np.array(pole_nodes, dtype=np.int64) - 1
     if min(node_ids.min(initial=0), poles.min(initial=0)) < 0 or max(node_ids.max(initial=-1), poles.max(initial=-1)) >= k:
@@ -199,6 +203,7 @@ def read_patch(face_id: int, face: TopoDS_Face, topo: Topology,
     node_param = np.full(k, np.nan)
     params = np.array(par)
     found = PatchRead(face_id, stored=not has_surface)
+    found.segments = _polygon_segments(node_ids, poles, np.array(polygon_sizes, dtype=np.int64))
     if facts:
         fa = np.array(facts, dtype=float)
         sizes_a = np.array(sizes, dtype=np.int64)
@@ -223,6 +228,20 @@ def read_patch(face_id: int, face: TopoDS_Face, topo: Topology,
     return found
 
 
+def _polygon_segments(node_ids: np.ndarray, poles: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """(s, 2) the node pairs next to each other in each edge polygon: polygons of `sizes` (p,) nodes, their nodes
+    taken in turn from node_ids (size > 0) or from the pole nodes `poles` (size < 0); pairs of one node left out."""
+    nodes = np.empty(int(np.abs(sizes).sum()), np.int64)
+    on_pole = np.repeat(sizes < 0, np.abs(sizes))
+    nodes[~on_pole], nodes[on_pole] = node_ids, poles
+    last = np.cumsum(np.abs(sizes)) - 1  # the last node of each polygon pairs with the next polygon's first: no pair
+    pairs = np.stack([nodes[:-1], nodes[1:]], axis=1)
+    keep = np.ones(len(pairs), bool)
+    keep[last[:-1]] = False
+    pairs = pairs[keep]
+    return pairs[pairs[:, 0] != pairs[:, 1]]
+
+
 def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology,
                   arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray] | None = None) -> FacePatch | None:
     """read_patch, with what it found recorded in `topo`: the face's patch, or None when it has no or a broken
@@ -232,18 +251,24 @@ def extract_patch(face_id: int, face: TopoDS_Face, topo: Topology,
     return found.patch
 
 
-def off_boundary_edges(patch: FacePatch) -> np.ndarray:
-    """(e, 2) node pairs of the edges used by one triangle only that do not lie on the B-rep boundary (an end on
-    neither an edge nor a vertex): none in a sound patch."""
-    t = patch.tris
+def off_boundary_edges(patch: FacePatch, segments: np.ndarray | None = None) -> np.ndarray:
+    """(e, 2) node pairs that break the patch's boundary: sides used by one triangle only that are not a segment of an
+    edge polygon (`segments` (s, 2), PatchRead.segments; without them, those with an end on neither a B-rep edge nor
+    a vertex), and segments no triangle uses. None in a sound patch: its boundary is its edges' discretisation."""
+    t, base = patch.tris, len(patch.nodes) + 1
     a, b = t.reshape(-1), t[:, [1, 2, 0]].reshape(-1)  # the directed edges (a → b) of every triangle
     key = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
-    _, inv, cnt = np.unique(edge_codes(t, len(patch.nodes) + 1).reshape(-1), return_inverse=True, return_counts=True)
+    codes, inv, cnt = np.unique(edge_codes(t, base).reshape(-1), return_inverse=True, return_counts=True)
     once = key[cnt[inv.reshape(-1)] == 1]
-    on_boundary = (patch.node_edge >= 0) | (patch.node_vertex >= 0)
-    return once[~on_boundary[once].all(axis=1)]
+    if segments is None:
+        on_boundary = (patch.node_edge >= 0) | (patch.node_vertex >= 0)
+        return once[~on_boundary[once].all(axis=1)]
+    seg = np.sort(segments, axis=1)
+    seg_codes = seg[:, 0] * base + seg[:, 1]
+    once_codes = once[:, 0] * base + once[:, 1]
+    return np.concatenate([once[~np.isin(once_codes, seg_codes)], seg[~np.isin(seg_codes, codes)]])
 
 
-def check_patch_boundary(patch: FacePatch) -> bool:
-    """True when every edge used once within the face lies on its B-rep boundary (both ends on edges/vertices)."""
-    return len(off_boundary_edges(patch)) == 0
+def check_patch_boundary(patch: FacePatch, segments: np.ndarray | None = None) -> bool:
+    """True when the patch's boundary is its B-rep edges' discretisation (off_boundary_edges finds nothing)."""
+    return len(off_boundary_edges(patch, segments)) == 0

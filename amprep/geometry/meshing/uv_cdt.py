@@ -9,6 +9,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.wire_crossings import overlapping_boxes
 
 MAX_ROUNDS = 40
 #: points are inserted no closer than this × tolerance (in metric-scaled (u,v) ≈ mm) to another
@@ -59,6 +60,15 @@ def min_spacing(tolerance: float, scale: np.ndarray, length_scale: np.ndarray) -
     return MIN_SPACING * tolerance * float(np.max(np.asarray(scale) / length_scale))
 
 
+def _triangle(data: dict, switches: str) -> dict:  # type: ignore[type-arg]
+    """Triangle's triangulate; its internal errors (segments that meet where the input says they do not) raise
+    meshing_failed."""
+    try:
+        return tr.triangulate(data, switches)
+    except RuntimeError as exc:
+        raise AmprepError(ErrorCode.MESHING_FAILED, f"the face's boundary in (u,v) meets itself ({exc})") from exc
+
+
 def triangulate_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None = None) -> np.ndarray:
     """(t, 3) constrained Delaunay triangles of points (n, 2) and segments (s, 2), nothing added on a segment, the
     parts holding a hole point (h, 2) and outside the segments removed. Triangle crashes the process on two equal
@@ -82,7 +92,7 @@ def triangulate_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | 
             inside = holes[(holes @ eq[:, :2].T + eq[:, 2] < -1e-9 * size).all(axis=1)]
             if len(inside):
                 data["holes"] = inside
-    out = tr.triangulate(data, "pYQ")
+    out = _triangle(data, "pYQ")
     if len(out.get("vertices", [])) != len(pts):
         raise AmprepError(ErrorCode.MESHING_FAILED, "the face's boundary in (u,v) self-intersects")
     return out.get("triangles", np.zeros((0, 3), np.int64)).astype(np.int64)
@@ -101,7 +111,10 @@ def quality_pslg(pts: np.ndarray, segments: np.ndarray, holes: np.ndarray | None
     data = dict(vertices=pts, segments=segments)
     if holes is not None and len(holes):
         data["holes"] = holes
-    out = tr.triangulate(data, f"pq{min_angle:g}YYQ")
+    try:
+        out = _triangle(data, f"pq{min_angle:g}YYQ")
+    except AmprepError:  # its refinement met segments that touch (a face pinched to a point): the plain CDT decides
+        return pts, triangulate_pslg(pts, segments, holes)
     verts = out.get("vertices", pts)
     if len(verts) < len(pts) or not np.array_equal(verts[:len(pts)], pts) or len(verts) - len(pts) > max_points:
         return pts, triangulate_pslg(pts, segments, holes)
@@ -221,3 +234,24 @@ def inside_loops(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
         crossings += np.bincount(p[x < xint], minlength=len(points))
         start = stop
     return crossings % 2 == 1
+
+
+def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(k,) sign of the turn a → b → c, each (k, 2)."""
+    return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+def crossing_segments(loops: list[np.ndarray]) -> np.ndarray:
+    """(k,) sorted indices of the loops' segments (node i to the next, each loop (n, 2) closed, the loops' segments
+    taken in turn) that cross or touch another segment with which they share no end point: what makes a boundary
+    polygon self-intersect (two edges discretised coarsely where they meet at a small angle)."""
+    a = np.concatenate(loops)
+    b = np.concatenate([np.roll(lp, -1, axis=0) for lp in loops])
+    pairs = np.array(overlapping_boxes(np.concatenate([np.minimum(a, b), np.maximum(a, b)], axis=1)),
+                     np.int64).reshape(-1, 2)
+    i, j = pairs[:, 0], pairs[:, 1]
+    shared = ((a[i] == a[j]).all(1) | (a[i] == b[j]).all(1) | (b[i] == a[j]).all(1) | (b[i] == b[j]).all(1))
+    i, j = i[~shared], j[~shared]
+    hit = ((_orient(a[i], b[i], a[j]) * _orient(a[i], b[i], b[j]) <= 0)
+           & (_orient(a[j], b[j], a[i]) * _orient(a[j], b[j], b[i]) <= 0))
+    return np.unique(np.concatenate([i[hit], j[hit]]))
