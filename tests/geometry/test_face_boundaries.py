@@ -1,17 +1,19 @@
-"""A face's mesh is bounded by its edges' discretisation, and a discretisation that crosses itself in (u,v) is split
-until it does not: forced on a solid built here (a thread swept along a helix onto a core, whose flank meets the top
-plane at a small angle beside the core's rim), checked by manifold3d and OCCT's volume."""
+"""A face's mesh is bounded by its edges' discretisation, a discretisation that crosses itself in (u,v) is split
+until it does not, and faces agree in orientation with their neighbours: forced on solids built here (a thread swept
+along a helix onto a core, whose flank meets the top plane at a small angle beside the core's rim; a nut written as
+IGES trimmed surfaces), checked by manifold3d and OCCT's volume."""
 
 import numpy as np
 import pytest
 from OCP.BRepGProp import BRepGProp
 from OCP.GProp import GProp_GProps
 
-from amprep.geometry.cad.read import model_from_shape
+from amprep.geometry.cad.read import model_from_shape, read_cad
+from amprep.geometry.cad.topology import mirrors
 from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
 from amprep.geometry.meshing.occt_read import FacePatch, off_boundary_edges
 from amprep.geometry.meshing.params import MeshParams
-from amprep.geometry.meshing.pipeline import mesh_model
+from amprep.geometry.meshing.pipeline import mesh_file, mesh_model
 from amprep.geometry.meshing.uv_cdt import crossing_segments
 
 
@@ -86,3 +88,37 @@ def test_touching_boundary_is_reported_not_raised():
              .union(cq.Workplane().center(-3, 0).circle(7).extrude(5)).val().wrapped)
     r = mesh_model(model_from_shape(shape), MeshParams(tolerance=0.1, mesher="quality"))
     assert len(r.mesh.triangles) > 0 and r.unmeshed_faces
+
+
+@pytest.fixture(scope="module")
+def trimmed_surface_nut(tmp_path_factory):
+    """(path, volume): a chamfered hexagon nut written as IGES trimmed surfaces (no topology: the reader places
+    each cone of revolution by a mirroring matrix of its own and sewing orients the faces by their placed normals)."""
+    import cadquery as cq
+    from OCP.IGESControl import IGESControl_Writer
+
+    nut = cq.Workplane().polygon(6, 20).extrude(8).faces(">Z").workplane().hole(10).edges("not |Z").chamfer(0.6)
+    shape = nut.val().wrapped
+    path = tmp_path_factory.mktemp("nut") / "nut_faces.igs"
+    writer = IGESControl_Writer("MM", 0)
+    writer.AddShape(shape)
+    writer.ComputeModel()
+    assert writer.Write(str(path))
+    return path, _volume(shape)
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_faces_mirrored_inside_their_shell_agree_with_their_neighbours(trimmed_surface_nut, mesher):
+    """Those faces were wound by the mirrored-instance rule (a mirror turns the normal, so reverse), which is wrong
+    for a face oriented by its own mirrored surface: 48 misoriented edges, and only after the read in a child (its
+    BREP round trip turned the reader's +1 scale on the mirror into -1). Now oriented like their neighbours, and the
+    same arrays whichever process read the file."""
+    path, volume = trimmed_surface_nut
+    model = read_cad(path)
+    assert any(mirrors(f) for f in model.faces)
+    direct = mesh_model(model, MeshParams(tolerance=0.1, mesher=mesher)).mesh
+    _, r = mesh_file(path, "iges", MeshParams(tolerance=0.1, mesher=mesher))
+    checks = check_mesh(r.mesh)
+    assert checks.boundary_edges == checks.misoriented_edges == checks.inside_out_shells == 0
+    assert manifold3d_accepts(r.mesh) and abs(checks.volume - volume) < 0.02 * volume
+    assert np.array_equal(direct.triangles, r.mesh.triangles) and np.array_equal(direct.vertices, r.mesh.vertices)

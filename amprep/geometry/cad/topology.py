@@ -21,13 +21,21 @@ def trsf_matrix(loc: TopLoc_Location) -> np.ndarray | None:
     return np.array([[t.Value(r, c) for c in range(1, 5)] for r in range(1, 4)])
 
 
+def mirrors(face: TopoDS_Face) -> bool:
+    """True when the face is placed by a mirroring location: the determinant of its matrix < 0 (gp_Trsf.IsNegative
+    reads the sign of the stored scale, which an IGES transformation can leave +1 on a mirror: a BREP round trip of
+    the same location then reads -1)."""
+    m = trsf_matrix(face.Location())
+    return m is not None and float(np.linalg.det(m[:, :3])) < 0
+
+
 def winds_inward(face: TopoDS_Face) -> bool:
     """True when triangles wound counter-clockwise in the face's (u,v) (normal S_u × S_v of its placed surface) face
-    into the material: the face is REVERSED, or placed by a mirroring location (det < 0), but not both. A mirror
-    turns the surface's normal but not the face's orientation flag, so a mirrored instance would come out inside
-    out without the second test."""
-    mirrored = not face.Location().IsIdentity() and face.Location().Transformation().IsNegative()
-    return (face.Orientation() == TopAbs_REVERSED) != mirrored
+    into the material: the face is REVERSED, or placed by a mirroring location, but not both. A mirror turns the
+    surface's normal but not the face's orientation flag, so a mirrored instance would come out inside out without
+    the second test; a face mirrored inside its own shell (oriented by its mirrored surface) is set right by its
+    neighbours after the weld (weld.agree_face_orientations)."""
+    return (face.Orientation() == TopAbs_REVERSED) != mirrors(face)
 
 
 def apply_trsf(m: np.ndarray | None, pts: np.ndarray) -> np.ndarray:

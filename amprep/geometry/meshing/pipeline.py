@@ -16,7 +16,7 @@ from OCP.BRep import BRep_Tool
 from amprep.geometry.cad.instances import Instancing, expand_mesh, template_face_of
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface, surface_of
-from amprep.geometry.cad.topology import Topology
+from amprep.geometry.cad.topology import Topology, mirrors
 from amprep.geometry.core.checks import DEGENERATE_REL_AREA
 from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.mesh import FaceInfo, Mesh
@@ -28,7 +28,13 @@ from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arra
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import Prepared, bbox_diagonal, face_uses, prepare
 from amprep.geometry.meshing.read_ahead import read_and_prepare_ahead
-from amprep.geometry.meshing.weld import orient_stored_shells, pinch_double_sheets, split_caps, weld
+from amprep.geometry.meshing.weld import (
+    agree_face_orientations,
+    orient_stored_shells,
+    pinch_double_sheets,
+    split_caps,
+    weld,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,8 +148,9 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
         for i in range(n_faces)
     )
     prog("welding", 0.95)
-    mesh = pinch_double_sheets(split_caps(orient_stored_shells(weld([p for p in patches if p is not None], infos,
-                                                                    topo.vertex_roots()))))
+    welded = weld([p for p in patches if p is not None], infos, topo.vertex_roots())
+    welded = agree_face_orientations(welded, np.array([not mirrors(f) for f in model.faces], bool))
+    mesh = pinch_double_sheets(split_caps(orient_stored_shells(welded)))
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))),

@@ -13,12 +13,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from amprep.geometry.cad.surfaces import Surface, project_points, surface_normals
 from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
-from amprep.geometry.core.vectors import cross
+from amprep.geometry.core.vectors import cross, norms, triangle_normals
 from amprep.geometry.meshing.occt_read import FacePatch
 
 #: a key's nodes are seated anew when one lies farther than this × the tolerance from their mean
@@ -313,6 +315,46 @@ def pole_folds(patch: FacePatch) -> bool:
     _, tris = np.unique(tris, return_inverse=True)
     tris = tris.reshape(-1, 3)
     return bool(edge_incidence(tris).count.max() > 2 or folded_pairs(tris, np.zeros(len(tris), np.int64)).any())
+
+
+def agree_face_orientations(mesh: Mesh, certain: np.ndarray) -> Mesh:
+    """The mesh with whole faces reversed where neighbours run the same way along a shared edge: faces joined by
+    shared edges split into two classes of relative orientation (a doubled graph, two nodes a face), and in each
+    group whose classes are consistent the class with less area on faces whose winding is `certain` ((F,) bool: not
+    placed by a mirror, topology.winds_inward), then less area, is reversed. Unchanged where no two faces disagree,
+    and unlooked at when every face's winding is certain."""
+    tris = mesh.triangles
+    if certain.all():
+        return mesh
+    inc = edge_incidence(tris, with_order=True)
+    twice = np.flatnonzero(inc.count == 2)
+    if not len(tris) or (inc.forward[twice] == 1).all():
+        return mesh
+    first = (np.cumsum(inc.count) - inc.count)[twice]
+    f1, f2 = mesh.face_ids[inc.order[first] // 3], mesh.face_ids[inc.order[first + 1] // 3]  # type: ignore[index]
+    pair = (f1 != f2) & (f1 >= 0) & (f2 >= 0)
+    f1, f2, odd = f1[pair], f2[pair], (inc.forward[twice] != 1)[pair].astype(np.int64)
+    n = len(mesh.faces)
+    rows = np.concatenate([2 * f1, 2 * f1 + 1])
+    cols = np.concatenate([2 * f2 + odd, 2 * f2 + 1 - odd])
+    _, label = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * n, 2 * n)),
+                                     directed=False)
+    cls, partner = label[0::2], label[1::2]
+    fine = cls != partner  # a face in both classes: its group cannot be oriented, left as it is
+    area = np.bincount(mesh.face_ids[mesh.face_ids >= 0], norms(triangle_normals(mesh.corners[mesh.face_ids >= 0])),
+                       minlength=n)
+    sure = np.bincount(cls[fine], (area * certain)[fine], minlength=2 * n)
+    total = np.bincount(cls[fine], area[fine], minlength=2 * n)
+    flip = fine & ((sure[cls] < sure[partner]) | ((sure[cls] == sure[partner]) & (total[cls] < total[partner])))
+    if not flip.any():
+        return mesh
+    sel = (mesh.face_ids >= 0) & flip[np.maximum(mesh.face_ids, 0)]
+    tris = tris.copy()
+    tris[sel] = tris[sel][:, [0, 2, 1]]
+    uv = None if mesh.uv is None else mesh.uv.copy()
+    if uv is not None:
+        uv[sel] = uv[sel][:, [0, 2, 1]]
+    return mesh.with_arrays(triangles=tris, uv=uv)
 
 
 def orient_stored_shells(mesh: Mesh) -> Mesh:
