@@ -9,6 +9,8 @@ is, within the tolerance; and the triangles and seconds beside OCCT's.
     python bench/real_parts.py --tools amprep,amprep-quality,occt-delabella --name bench_real_parts_quality
     python bench/real_parts.py --package kicad-packages3d --sample 120 --tools amprep,amprep-quality,occt-delabella \
         --name bench_real_parts_kicad                  # 120 of KiCad's 3D models of electronic parts
+    python bench/real_parts.py --built --tools amprep,amprep-quality,occt-delabella --name bench_built_parts
+                                                       # solids built here (built_parts.py), each written four ways
 
 Downloads the package with `apt-get download` (no install) and writes docs/bench_real_parts.md and .csv.
 """
@@ -28,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from built_parts import PARTS, write_built_parts  # noqa: E402
 from convert import ROOT, run_one  # noqa: E402
 
 CAD_SUFFIXES = (".step", ".stp", ".iges", ".igs", ".brep", ".brp")
@@ -70,6 +73,7 @@ def main() -> None:
     ap.add_argument("--tools", default="amprep,occt-delabella", help="amprep, amprep-quality, occt-delabella (the "
                     "reference every other tool is set beside)")
     ap.add_argument("--from-log", help="write the tables from the JSON lines a run printed (e.g. one stopped early)")
+    ap.add_argument("--built", action="store_true", help="the solids of built_parts.py, not a package's files")
     ap.add_argument("--sample", type=int, default=0, help="only this many parts, evenly spaced over the package's "
                     "sorted list (a package of thousands, as kicad-packages3d)")
     args = ap.parse_args()
@@ -78,7 +82,7 @@ def main() -> None:
         write_tables(rows, args, len({r["part"] for r in rows}), complete=False)
         return
     tmp = Path(tempfile.mkdtemp(prefix="amprep-real-"))
-    parts = package_parts(args.package, tmp)
+    parts = write_built_parts(tmp / "built") if args.built else package_parts(args.package, tmp)
     if 0 < args.sample < len(parts):
         parts = [parts[i] for i in np.linspace(0, len(parts) - 1, args.sample).round().astype(int)]
     rows = []
@@ -120,13 +124,19 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, compl
     cells: dict[tuple[str, float], dict[str, dict]] = {}
     for r in rows:
         cells.setdefault((r["part"], r["tolerance"]), {})[r["tool"]] = r
-    lines = [f"# Real parts outside the corpus: {args.package}", "",
-             f"Made by `python bench/real_parts.py --package {args.package} --tolerances {args.tolerances}"
+    source = (f"--built --tolerances {args.tolerances}" if args.built
+              else f"--package {args.package} --tolerances {args.tolerances}")
+    what = (f"the {len(PARTS)} solids bench/built_parts.py builds with cadquery (threads swept on a helix, engraved "
+            "text, twisted and lofted B-splines, a torus thinner than a coarse tolerance, holes smaller than it, a "
+            "crescent pinched to a point, a parametric surface), each written as BREP, STEP, IGES solids and IGES "
+            "trimmed surfaces" if args.built else
+            f"{'an evenly spaced sample of the STEP, IGES and BREP files' if args.sample else 'every STEP, IGES and BREP file'}"
+            " the Debian package ships and the B-rep of each FreeCAD document in it, each once by content")
+    lines = [f"# {'Solids built here' if args.built else f'Real parts outside the corpus: {args.package}'}", "",
+             f"Made by `python bench/real_parts.py {source}"
              f"{'' if args.tools == 'amprep,occt-delabella' else f' --tools {args.tools} --name {args.name}'}"
-             f"{f' --sample {args.sample}' if args.sample else ''}`: "
-             f"{'an evenly spaced sample of the STEP, IGES and BREP files' if args.sample else 'every STEP, IGES and BREP file'}"
-             " the Debian package ships and the B-rep of each FreeCAD document in it, each once "
-             f"by content ({n_parts} parts{'' if complete else ', those a run stopped early had reached, from its log'}), "
+             f"{f' --sample {args.sample}' if args.sample else ''}`: {what} "
+             f"({n_parts} {'files' if args.built else 'parts'}{'' if complete else ', those a run stopped early had reached, from its log'}), "
              "converted end to end in a child process per cell by amprep (`amprep-quality`: `--mesher quality`) and by "
              "the bare OCCT pipeline (its reader, BRepMesh Delabella, StlAPI_Writer). `closed`: every edge of the "
              "written STL shared by two triangles, consistently oriented; `within`: worst sampled chordal error ≤ the "

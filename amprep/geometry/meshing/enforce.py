@@ -189,15 +189,21 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
 def _uncross(f: FaceStates) -> set[int]:
     """Mesh again the faces left unmeshed because their discretised boundary crosses itself in (u,v) (two edges that
     meet at a small angle, each a chord off its curve, cross there): the crossing segments split at their middle
-    parameter, every face of a split edge meshed again, up to UNCROSS_ROUNDS times; returns the faces meshed again."""
+    parameter, every face of a split edge meshed again, up to UNCROSS_ROUNDS times and while the crossings get fewer
+    (edges that touch cross however fine); returns the faces meshed again."""
     redone: set[int] = set()
+    before = np.inf
     for _ in range(UNCROSS_ROUNDS):
         split: set[int] = set()
+        crossings = 0
         for i in f.unmeshed:
             if f.surfaces[i] is not None:
-                split |= _split_crossings(f, i)
-        if not split:
+                edges, count = _split_crossings(f, i)
+                split |= edges
+                crossings += count
+        if not split or crossings >= before:
             break
+        before = crossings
         faces = set().union(*(_faces_of_edge(f.model, f.topo, e) for e in split))
         for i in faces:
             f.fallback.setdefault(i, "boundary_crossing")
@@ -206,15 +212,15 @@ def _uncross(f: FaceStates) -> set[int]:
     return redone
 
 
-def _split_crossings(f: FaceStates, i: int) -> set[int]:
+def _split_crossings(f: FaceStates, i: int) -> tuple[set[int], int]:
     """The edges of face i split at the middle parameter of each of their segments that crosses another in (u,v)
-    (uv_cdt.crossing_segments); returns those edges."""
+    (uv_cdt.crossing_segments); returns those edges and the number of crossing segments."""
     try:
         loops = boundary_loops(f.model.faces[i], f.topo, f.tol * ENFORCE_MARGIN, f.params.angular)
     except AmprepError:
-        return set()
+        return set(), 0
     if not loops:
-        return set()
+        return set(), 0
     hit = crossing_segments([lp["uv"] for lp in loops])
     edges = np.concatenate([lp["segment"] for lp in loops])[hit]
     spans = np.concatenate([lp["span"] for lp in loops])[hit]
@@ -224,7 +230,7 @@ def _split_crossings(f: FaceStates, i: int) -> set[int]:
         mids = spans[keep & (edges == e)].mean(axis=1)
         f.topo.edge_params[e] = np.unique(np.concatenate([f.topo.edge_params[e], mids]))
         split.add(e)
-    return split
+    return split, int(keep.sum())
 
 
 def less_gap(target: float, gap: float) -> float:
