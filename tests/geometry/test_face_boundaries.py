@@ -17,13 +17,27 @@ from amprep.geometry.meshing.pipeline import mesh_file, mesh_model
 from amprep.geometry.meshing.uv_cdt import crossing_segments
 
 
-@pytest.fixture(scope="module")
-def thread():
+def _thread(pitch: float, height: float, radius: float, size: float):
     import cadquery as cq
 
-    helix = cq.Wire.makeHelix(pitch=1.5, height=12, radius=5)
-    swept = cq.Workplane("XZ").center(5, 0).polygon(3, 1.2).sweep(cq.Workplane().add(helix), isFrenet=True)
-    return cq.Workplane().circle(5).extrude(12).union(swept).val().wrapped
+    helix = cq.Wire.makeHelix(pitch=pitch, height=height, radius=radius)
+    swept = cq.Workplane("XZ").center(radius, 0).polygon(3, size).sweep(cq.Workplane().add(helix), isFrenet=True)
+    return cq.Workplane().circle(radius).extrude(height).union(swept).val().wrapped
+
+
+def _iges_faces(shape, path) -> None:
+    """The shape written as IGES trimmed surfaces (no topology: sewn again on reading)."""
+    from OCP.IGESControl import IGESControl_Writer
+
+    writer = IGESControl_Writer("MM", 0)
+    writer.AddShape(shape)
+    writer.ComputeModel()
+    assert writer.Write(str(path))
+
+
+@pytest.fixture(scope="module")
+def thread():
+    return _thread(1.5, 12, 5, 1.2)
 
 
 def _volume(shape) -> float:
@@ -95,15 +109,11 @@ def trimmed_surface_nut(tmp_path_factory):
     """(path, volume): a chamfered hexagon nut written as IGES trimmed surfaces (no topology: the reader places
     each cone of revolution by a mirroring matrix of its own and sewing orients the faces by their placed normals)."""
     import cadquery as cq
-    from OCP.IGESControl import IGESControl_Writer
 
     nut = cq.Workplane().polygon(6, 20).extrude(8).faces(">Z").workplane().hole(10).edges("not |Z").chamfer(0.6)
     shape = nut.val().wrapped
     path = tmp_path_factory.mktemp("nut") / "nut_faces.igs"
-    writer = IGESControl_Writer("MM", 0)
-    writer.AddShape(shape)
-    writer.ComputeModel()
-    assert writer.Write(str(path))
+    _iges_faces(shape, path)
     return path, _volume(shape)
 
 
@@ -122,3 +132,16 @@ def test_faces_mirrored_inside_their_shell_agree_with_their_neighbours(trimmed_s
     assert checks.boundary_edges == checks.misoriented_edges == checks.inside_out_shells == 0
     assert manifold3d_accepts(r.mesh) and abs(checks.volume - volume) < 0.02 * volume
     assert np.array_equal(direct.triangles, r.mesh.triangles) and np.array_equal(direct.vertices, r.mesh.vertices)
+
+
+def test_two_polygons_of_one_edge_are_not_kept(tmp_path):
+    """A finer thread written as IGES trimmed surfaces: BRepMesh gave the top circle two polygons, 9 segments on the
+    top plane and 5 on the core, and the weld, which knows an edge node by its parameter, left 14 edges open. The
+    second face is meshed by ours from the first one's discretisation now."""
+    shape = _thread(0.8, 6, 3, 0.6)
+    _iges_faces(shape, tmp_path / "thread_faces.igs")
+    r = mesh_model(read_cad(tmp_path / "thread_faces.igs"), MeshParams(tolerance=0.1))
+    checks = check_mesh(r.mesh)
+    assert checks.boundary_edges == checks.nonmanifold_edges == checks.misoriented_edges == 0
+    assert "edge_mismatch" in r.fallback_faces.values() and r.within_tolerance
+    assert abs(checks.volume - _volume(shape)) < 0.05 * _volume(shape)

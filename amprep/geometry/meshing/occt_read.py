@@ -117,14 +117,21 @@ class PatchRead:
     def __getstate__(self) -> dict:  # type: ignore[type-arg]
         return {**self.__dict__, "patch": None, "segments": np.zeros((0, 2), np.int64)}
 
-    def record(self, topo: Topology) -> None:
-        """Add the edges' discretisations (sorted, where topo has none yet) and the collapses to the topology."""
+    def record(self, topo: Topology) -> bool:
+        """Add the edges' discretisations (sorted, where topo has none yet) and the collapses to the topology; False
+        when an edge already there has other parameters than this face's polygon on it (BRepMesh gave two faces of
+        one edge two polygons: the weld, which knows a node by its edge and parameter, could not join them)."""
         ends = np.cumsum(self.sizes)
+        agrees = True
         for ei, end, size in zip(self.edges.tolist(), ends.tolist(), self.sizes.tolist(), strict=True):
+            params = np.sort(self.params[end - size:end])
             if ei not in topo.edge_params:
-                topo.edge_params[ei] = np.sort(self.params[end - size:end])
+                topo.edge_params[ei] = params
+            elif not np.array_equal(topo.edge_params[ei], params):
+                agrees = False
         for a, b in self.merges:
             topo.merge_vertices(a, b)
+        return agrees
 
     def assemble(self, face: TopoDS_Face, arrays: tuple[np.ndarray, np.ndarray | None, np.ndarray] | None = None
                  ) -> FacePatch | None:

@@ -133,7 +133,8 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
         fallback: dict[int, str] = {}
         first_error: dict[int, np.ndarray] = {}
         for i, look in enumerate(looks):
-            look.found.record(topo)
+            if not look.found.record(topo) and look.reason is None:
+                look.reason = "edge_mismatch"
             patches.append(look.found.assemble(model.faces[i], bulk[i]) if look.reason is None else None)
             if look.reason is not None:
                 fallback[i] = look.reason
