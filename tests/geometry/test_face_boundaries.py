@@ -145,3 +145,18 @@ def test_two_polygons_of_one_edge_are_not_kept(tmp_path):
     assert checks.boundary_edges == checks.nonmanifold_edges == checks.misoriented_edges == 0
     assert "edge_mismatch" in r.fallback_faces.values() and r.within_tolerance
     assert abs(checks.volume - _volume(shape)) < 0.05 * _volume(shape)
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_one_closed_trimmed_surface_is_sewn_to_itself(tmp_path, mesher):
+    """A torus written as one IGES trimmed surface: its seams come as two pairs of free edges, and a file of one face
+    was never sewn (136 open edges at 0.1 mm). Sewn onto itself it meshes closed."""
+    import cadquery as cq
+
+    shape = cq.Solid.makeTorus(30, 0.4).wrapped
+    _iges_faces(shape, tmp_path / "torus.igs")
+    model = read_cad(tmp_path / "torus.igs")
+    assert model.sewn and len(model.faces) == 1
+    r = mesh_model(model, MeshParams(tolerance=0.1, mesher=mesher))
+    checks = check_mesh(r.mesh)
+    assert checks.boundary_edges == checks.nonmanifold_edges == checks.misoriented_edges == 0 and r.within_tolerance

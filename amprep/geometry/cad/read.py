@@ -178,13 +178,14 @@ def free_edge_count(shape: TopoDS_Shape) -> int:
 
 def sew_loose_faces(shape: TopoDS_Shape, tolerance: float = SEW_TOLERANCE) -> tuple[TopoDS_Shape, bool]:
     """(shape, sewn): the faces outside any solid (in open shells, one shell per face as some STEP surface models
-    have, or in no shell, as IGES has them) sewn together when they are two or more, have a surface and leave
-    edges free; solids are kept as they are. Unchanged, False, when there is nothing to sew."""
+    have, or in no shell, as IGES has them) sewn together when they have a surface and leave edges free (one face
+    too: a closed surface written as one trimmed surface, a torus, has its seams as free edge pairs); solids are
+    kept as they are. Unchanged, False, when there is nothing to sew."""
     loose = explore(shape, TopAbs_SHELL, TopoDS.Shell_s, avoid=TopAbs_SOLID)
     loose += explore(shape, TopAbs_FACE, TopoDS.Face_s, avoid=TopAbs_SHELL)
     part = compound(loose)
     faces = explore(part, TopAbs_FACE, TopoDS.Face_s)
-    if len(faces) < 2 or any(BRep_Tool.Surface_s(f) is None for f in faces) or free_edge_count(part) == 0:
+    if not faces or any(BRep_Tool.Surface_s(f) is None for f in faces) or free_edge_count(part) == 0:
         return shape, False
     solids = explore(shape, TopAbs_SOLID, TopoDS.Solid_s)
     sewn = _sew(part, tolerance)
