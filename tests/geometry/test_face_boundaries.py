@@ -70,9 +70,9 @@ def test_crossing_segments_of_boundary_polygons():
     square = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float)
     assert len(crossing_segments([square])) == 0
     bowtie = np.array([[0, 0], [1, 1], [1, 0], [0, 1]], float)
-    assert crossing_segments([bowtie]).tolist() == [0, 2]
+    assert crossing_segments([bowtie]).tolist() == [[0, 2]]
     poking = np.array([[1.5, 0.5], [2.5, 0.5], [2.5, 1.5], [1.5, 1.5]])  # a hole through the square's right side
-    assert crossing_segments([square, poking]).tolist() == [1, 4, 6]
+    assert crossing_segments([square, poking]).tolist() == [[1, 4], [1, 6]]
 
 
 @pytest.mark.parametrize("mesher", ["occt", "quality"])

@@ -213,24 +213,28 @@ def _uncross(f: FaceStates) -> set[int]:
 
 
 def _split_crossings(f: FaceStates, i: int) -> tuple[set[int], int]:
-    """The edges of face i split at the middle parameter of each of their segments that crosses another in (u,v)
-    (uv_cdt.crossing_segments); returns those edges and the number of crossing segments."""
+    """The edges of face i split at the middle parameter of the longer (in (u,v)) of each pair of their segments that
+    cross (uv_cdt.crossing_segments: near a vertex where two edges meet at a small angle, the longer chord leaves at
+    the larger angle; halving both would keep the crossing); returns those edges and the number of crossing pairs."""
     try:
         loops = boundary_loops(f.model.faces[i], f.topo, f.tol * ENFORCE_MARGIN, f.params.angular)
     except AmprepError:
         return set(), 0
     if not loops:
         return set(), 0
-    hit = crossing_segments([lp["uv"] for lp in loops])
-    edges = np.concatenate([lp["segment"] for lp in loops])[hit]
-    spans = np.concatenate([lp["span"] for lp in loops])[hit]
+    uv = [lp["uv"] for lp in loops]
+    pairs = crossing_segments(uv)
+    length = np.linalg.norm(np.concatenate([np.roll(q, -1, axis=0) - q for q in uv]), axis=1)
+    longer = np.where(length[pairs[:, 0]] >= length[pairs[:, 1]], pairs[:, 0], pairs[:, 1])
+    edges = np.concatenate([lp["segment"] for lp in loops])[longer]
+    spans = np.concatenate([lp["span"] for lp in loops])[longer]
     keep = spans[:, 0] != spans[:, 1]
     split: set[int] = set()
     for e in np.unique(edges[keep]).tolist():
-        mids = spans[keep & (edges == e)].mean(axis=1)
+        mids = np.unique(spans[keep & (edges == e)].mean(axis=1))
         f.topo.edge_params[e] = np.unique(np.concatenate([f.topo.edge_params[e], mids]))
         split.add(e)
-    return split, int(keep.sum())
+    return split, len(pairs)
 
 
 def less_gap(target: float, gap: float) -> float:

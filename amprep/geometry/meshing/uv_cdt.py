@@ -242,9 +242,9 @@ def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 def crossing_segments(loops: list[np.ndarray]) -> np.ndarray:
-    """(k,) sorted indices of the loops' segments (node i to the next, each loop (n, 2) closed, the loops' segments
-    taken in turn) that cross or touch another segment with which they share no end point: what makes a boundary
-    polygon self-intersect (two edges discretised coarsely where they meet at a small angle)."""
+    """(k, 2) pairs of indices of the loops' segments (node i to the next, each loop (n, 2) closed, the loops'
+    segments taken in turn) that cross or touch with no end point shared: what makes a boundary polygon
+    self-intersect (two edges discretised coarsely where they meet at a small angle)."""
     a = np.concatenate(loops)
     b = np.concatenate([np.roll(lp, -1, axis=0) for lp in loops])
     pairs = np.array(overlapping_boxes(np.concatenate([np.minimum(a, b), np.maximum(a, b)], axis=1)),
@@ -254,4 +254,4 @@ def crossing_segments(loops: list[np.ndarray]) -> np.ndarray:
     i, j = i[~shared], j[~shared]
     hit = ((_orient(a[i], b[i], a[j]) * _orient(a[i], b[i], b[j]) <= 0)
            & (_orient(a[j], b[j], a[i]) * _orient(a[j], b[j], b[i]) <= 0))
-    return np.unique(np.concatenate([i[hit], j[hit]]))
+    return np.sort(np.stack([i[hit], j[hit]], axis=1), axis=1)
