@@ -17,10 +17,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from amprep.geometry.cad.surfaces import Surface, project_points, surface_normals
-from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume
+from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume, triangle_areas
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
-from amprep.geometry.core.vectors import cross, norms, triangle_normals
+from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.occt_read import FacePatch
 
 #: a key's nodes are seated anew when one lies farther than this × the tolerance from their mean
@@ -324,11 +324,11 @@ def agree_face_orientations(mesh: Mesh, certain: np.ndarray) -> Mesh:
     placed by a mirror, topology.winds_inward), then less area, is reversed. Unchanged where no two faces disagree,
     and unlooked at when every face's winding is certain."""
     tris = mesh.triangles
-    if certain.all():
+    if certain.all() or not len(tris):
         return mesh
     inc = edge_incidence(tris, with_order=True)
     twice = np.flatnonzero(inc.count == 2)
-    if not len(tris) or (inc.forward[twice] == 1).all():
+    if (inc.forward[twice] == 1).all():
         return mesh
     first = (np.cumsum(inc.count) - inc.count)[twice]
     f1, f2 = mesh.face_ids[inc.order[first] // 3], mesh.face_ids[inc.order[first + 1] // 3]  # type: ignore[index]
@@ -341,14 +341,14 @@ def agree_face_orientations(mesh: Mesh, certain: np.ndarray) -> Mesh:
                                      directed=False)
     cls, partner = label[0::2], label[1::2]
     fine = cls != partner  # a face in both classes: its group cannot be oriented, left as it is
-    area = np.bincount(mesh.face_ids[mesh.face_ids >= 0], norms(triangle_normals(mesh.corners[mesh.face_ids >= 0])),
-                       minlength=n)
+    on_face = mesh.face_ids >= 0
+    area = np.bincount(mesh.face_ids[on_face], triangle_areas(mesh.corners[on_face]), minlength=n)
     sure = np.bincount(cls[fine], (area * certain)[fine], minlength=2 * n)
     total = np.bincount(cls[fine], area[fine], minlength=2 * n)
     flip = fine & ((sure[cls] < sure[partner]) | ((sure[cls] == sure[partner]) & (total[cls] < total[partner])))
     if not flip.any():
         return mesh
-    sel = (mesh.face_ids >= 0) & flip[np.maximum(mesh.face_ids, 0)]
+    sel = on_face & flip[np.maximum(mesh.face_ids, 0)]
     tris = tris.copy()
     tris[sel] = tris[sel][:, [0, 2, 1]]
     uv = None if mesh.uv is None else mesh.uv.copy()
