@@ -251,7 +251,7 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
     before = dict(f.topo.edge_params)
     faces = [f.model.faces[i] for i in remesh]
     collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
-    grade_edges(faces, [f.surfaces[i].surface_type for i in remesh], f.topo, f.tol)  # type: ignore[union-attr]
+    grade_edges(faces, [f.surfaces[i] for i in remesh], f.topo, f.tol, target)  # type: ignore[misc]
     loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
     planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
                             target, f.params.angular, f.params.max_triangles)

@@ -18,7 +18,7 @@ from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
-from amprep.geometry.meshing.shared_edges import has_pole, split_segments
+from amprep.geometry.meshing.shared_edges import ANALYTIC, MAX_PARTS, bend_sizes, edge_points, has_pole, split_segments
 from amprep.geometry.meshing.uv_cdt import surface_speeds
 from amprep.geometry.meshing.uv_seed import DIFF_STEP, polygon_area, second_form
 
@@ -271,6 +271,11 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
     fixed: set[int] = getattr(topo, "_lattice_edges", set())
     planned: list[Field | None] = [None] * len(faces)
     expected = 0.0
+    free_form: dict[int, list[tuple[int, TopoDS_Face, Surface]]] = {}  # edge: the free-form faces it bounds
+    for k, (face, surface) in enumerate(zip(faces, surfaces, strict=True)):
+        if surface is not None and surface.surface_type not in ANALYTIC:
+            for e in face_edges(face):
+                free_form.setdefault(topo.edge_index(e), []).append((k, face, surface))
     for k, (face, surface, lps) in enumerate(zip(faces, surfaces, loops, strict=True)):
         if surface is None or len(lps) != 1 or (sides := rectangle_sides(lps[0])) is None or min(sides.edges[:2]) < 0:
             continue
@@ -284,11 +289,6 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
         n = 0.0 if rows is None else expected_triangles(field, sides, rows)  # type: ignore[arg-type]
         if rows is None or (n < LATTICE_MIN and not (surface.closed_form is not None and has_pole(face))):
             continue
-        expected += n
-        if expected > max_triangles:
-            raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tolerance:g} mm the quality mesher's rows alone would "
-                              f"make about {expected:,.0f} triangles, over the limit of {max_triangles:,}: use a "
-                              "coarser tolerance, the default mesher or a higher max_triangles")
         edges = {e: edge for e, edge in ((topo.edge_index(x), x) for x in face_edges(face))}
         lr = sides.edges[:2]
         given = [_edge_v(face, edges[e], topo.edge_params[e]) for e in lr if e in fixed]
@@ -296,6 +296,17 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
             if any(len(g) != len(given[0]) or not np.allclose(g, given[0], rtol=0, atol=1e-9) for g in given):
                 continue
             rows = given[0]
+        else:
+            neighbours = {e: [(f, s) for j, f, s in free_form.get(e, []) if j != k] for e in set(lr)}
+            rows = _rows_for_neighbours(face, edges, neighbours, rows, tolerance)  # type: ignore[arg-type]
+            if rows is None:
+                continue
+            n = expected_triangles(field, sides, rows)  # type: ignore[arg-type]
+        expected += n
+        if expected > max_triangles:
+            raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tolerance:g} mm the quality mesher's rows alone would "
+                              f"make about {expected:,.0f} triangles, over the limit of {max_triangles:,}: use a "
+                              "coarser tolerance, the default mesher or a higher max_triangles")
         new = {e: _param_of_v(face, edges[e], rows) for e in set(lr) if e not in fixed}
         if any(p is None for p in new.values()):
             continue
@@ -308,6 +319,31 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
         planned[k] = replace(field, expected=n)  # type: ignore[arg-type]
     topo._lattice_edges = fixed  # type: ignore[attr-defined]
     return planned
+
+
+def _rows_for_neighbours(face: TopoDS_Face, edges: dict, neighbours: dict[int, list[tuple[TopoDS_Face, Surface]]],  # type: ignore[type-arg]
+                         rows: np.ndarray, tolerance: float) -> np.ndarray | None:
+    """The rows (N+1,) with each step cut where a side edge's segment at them is longer than a free-form face on its
+    other side allows (shared_edges.bend_sizes: a triangle of that face on a longer segment is a sliver); None when a
+    side's v is not monotone along it (_param_of_v)."""
+    parts = np.ones(len(rows) - 1, np.int64)
+    for e, others in neighbours.items():
+        if not others:
+            continue
+        params = _param_of_v(face, edges[e], rows)
+        if params is None:
+            return None
+        seg = np.linalg.norm(np.diff(edge_points(edges[e], params), axis=0), axis=1)
+        need = np.clip(np.ceil(seg / bend_sizes(edges[e], params, others, tolerance) - SPLIT_SLACK), 1, MAX_PARTS)
+        pc = BRep_Tool.CurveOnSurface_s(edges[e], face, 0.0, 0.0)
+        if (pc.Value(float(params[0])).Y() > pc.Value(float(params[-1])).Y()) != (rows[0] > rows[-1]):
+            need = need[::-1]  # params run along the edge, rows along v
+        parts = np.maximum(parts, need.astype(np.int64))
+    if not (parts > 1).any():
+        return rows
+    up = rows[0] <= rows[-1]
+    cut = split_segments(rows if up else rows[::-1], parts if up else parts[::-1])
+    return cut if up else cut[::-1]
 
 
 def _split_to_field(face: TopoDS_Face, edge, topo: Topology, field: Field, v: float) -> None:  # type: ignore[no-untyped-def]

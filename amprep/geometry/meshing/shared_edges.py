@@ -12,9 +12,11 @@ from OCP.GCPnts import GCPnts_TangentialDeflection
 from OCP.GProp import GProp_GProps
 from OCP.TopoDS import TopoDS_Edge, TopoDS_Face
 
+from amprep.geometry.cad.surfaces import Surface, uv_extent
 from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.vectors import cross
-from amprep.geometry.meshing.uv_cdt import MIN_SPACING
+from amprep.geometry.meshing.uv_cdt import MIN_SPACING, surface_speeds
+from amprep.geometry.meshing.uv_seed import LOCAL_FLOOR, standing_error
 
 
 def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
@@ -80,7 +82,7 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
 
 def edge_length(edge: TopoDS_Edge, params: np.ndarray) -> float:
     """The length of an edge's discretisation at params (n,): Σ of its chords."""
-    return float(np.linalg.norm(np.diff(_edge_points(edge, params), axis=0), axis=1).sum())
+    return float(np.linalg.norm(np.diff(edge_points(edge, params), axis=0), axis=1).sum())
 
 
 #: a face whose perimeter is under this × the collapse length keeps its edges (collapse_short_edges)
@@ -137,11 +139,23 @@ MAX_PARTS = 64
 NEEDLE = 95.0
 #: a face narrower (face_width) than this × the chord tolerance has no width: its edges are not cut
 SLIVER = 1e-3
+#: a boundary segment of a free-form face is cut where a triangle standing on it with this height × its length
+#: would be over the target (bend_sizes): tan 30° / 2, Triangle's 30° minimum angle at both ends of the segment
+APEX = 0.29
+#: and where that triangle's error would be over this × the target (the rest is room for the triangles the face's
+#: interior actually gives it)
+ROOM = 0.8
+#: the curvature there is taken over steps of this × the target on the surface (a fold far finer, as a fitted
+#: B-spline's overshoot by 1 µm along a side where its speed vanishes, is not the face's shape)
+STENCIL = 2.0
+#: the surface's typical speeds (bend_sizes' floor of the first form) are the median over this many² points
+SPEED_GRID = 5
 #: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
 UV_STRAIGHT = 1e-6
 
 
-def _edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+def edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """(n, 3) the edge curve's points at params (n,)."""
     curve = BRepAdaptor_Curve(edge)
     return np.array([curve.Value(float(t)).Coord() for t in params]).reshape(-1, 3)
 
@@ -150,7 +164,7 @@ def _straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
     """True when the edge is a straight line in space (whatever its curve type: a STEP may store a line as a B-spline):
     its points at the ends, the middle and the quarters lie within 1e-6 × its chord of the chord."""
     t = np.interp([0, 0.25, 0.5, 0.75, 1], [0, 1], [params[0], params[-1]])
-    p = _edge_points(edge, t)
+    p = edge_points(edge, t)
     chord = p[-1] - p[0]
     length = float(np.linalg.norm(chord))
     if length <= 0:
@@ -198,20 +212,24 @@ def split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate(new))
 
 
-def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floor: float = 0.0) -> None:
-    """Cut the discretised edges of `faces` (surface types `kinds`; their params in topo.edge_params) where a
+def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topology, floor: float = 0.0,
+                target: float = 0.0) -> None:
+    """Cut the discretised edges of `faces` (on `surfaces`; their params in topo.edge_params) where a
     segment is longer than GRADE × the narrower width of the faces it bounds, or than GROWTH × its distance from the
     nearer end plus the shortest segment at that end's vertex (over every edge there): a long segment beside a
     short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends;
-    not on a straight edge of a free-form face). No size is set
+    not on a straight edge of a free-form face); and, with a `target`, than the chord a free-form face it bounds keeps
+    within it across its most curved direction there (bend_sizes). No size is set
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
+    bent: dict[int, list[tuple[TopoDS_Face, Surface]]] = {}
     straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face, or of one
     # with a pole: their points, cut finer, make ears of three, flat in space, that the face's Delaunay keeps
     # not cut: the edges of a face of no width (two edges on one line, out and back, as FreeCAD's SOD-323 has): a
     # point cut into one would have no partner on the other, and the face no room for triangles to join them
     frozen: set[int] = set()
-    for face, kind in zip(faces, kinds, strict=True):
+    for face, surface in zip(faces, surfaces, strict=True):
+        kind = surface.surface_type
         w, pole = face_width(face, topo), has_pole(face)
         for edge in face_edges(face):
             if BRep_Tool.Degenerated_s(edge):
@@ -225,8 +243,10 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
             limit = GRADE * w if w >= floor else min(GRADE * floor, NEEDLE * w)
             if ei in topo.edge_params and (ei not in cap or limit < cap[ei][0]):
                 cap[ei] = (limit, edge)
+            if target > 0 and kind not in ANALYTIC:
+                bent.setdefault(ei, []).append((face, surface))
     for _ in range(2):
-        points = {ei: _edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
+        points = {ei: edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
                   if len(topo.edge_params[ei]) >= 2}
         at_vertex: dict[int, float] = {}
         for ei, pts in points.items():
@@ -243,12 +263,50 @@ def grade_edges(faces: list[TopoDS_Face], kinds: list[str], topo: Topology, floo
             size = np.minimum(at_vertex[v1] + GROWTH * mid, at_vertex[v2] + GROWTH * (along[-1] - mid))
             if ei in straight:
                 size = np.full_like(seg, np.inf)
+            elif ei in bent:
+                size = np.minimum(size, bend_sizes(edge, topo.edge_params[ei], bent[ei], target))
             if np.isfinite(limit) and limit > 0:
                 size = np.minimum(size, limit)
             size = np.maximum(size, floor)
             parts = np.minimum(np.ceil(seg / np.maximum(size, 1e-12)), MAX_PARTS).astype(np.int64)
             if (parts > 1).any() and ei not in frozen:
                 topo.edge_params[ei] = split_segments(topo.edge_params[ei], parts)
+
+
+def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_Face, Surface]],
+               target: float) -> np.ndarray:
+    """(n−1,) the longest each segment of an edge (params (n,)) may be for a triangle of APEX height to stand on it
+    within the target on each face: √(8 target / b) with b uv_seed.side_bend at a quarter, half and three quarters
+    of it, taken at the segment's own scale (steps of its length in (u,v), the stencil moved inside the face's
+    bounds). On a longer segment the only triangles that keep the target are slivers tilted off the surface, which
+    a move of their corners by the B-rep's gap breaks."""
+    t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()
+    chord = np.repeat(np.diff(edge_points(edge, params), axis=0), 3, axis=0)
+    bend = np.zeros(len(t))
+    for face, surface in faces:
+        pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+        if pcurve is None:
+            continue
+        uv = np.array([pcurve.Value(float(x)).Coord() for x in t]).reshape(-1, 2)
+        floor = LOCAL_FLOOR * _median_speeds(surface, uv)
+        speed = np.maximum(np.stack(surface_speeds(surface, uv, uv), axis=1), floor)
+        step = np.minimum(STENCIL * target / np.maximum(speed, 1e-300), uv_extent(surface) / 8)
+        if surface.bounds is not None:  # the stencil inside the face: past its bounds a surface may be clamped
+            u1, u2, v1, v2 = surface.bounds
+            uv = np.clip(uv, np.array([u1, v1]) + step, np.array([u2, v2]) - step)
+        bend = np.maximum(bend, standing_error(surface, uv, step, floor, chord, APEX))
+    bend = bend.reshape(-1, 3).max(axis=1)
+    with np.errstate(divide="ignore"):
+        return np.where(bend > 0, np.sqrt(ROOM * target / bend), np.inf)
+
+
+def _median_speeds(surface: Surface, uv: np.ndarray) -> np.ndarray:
+    """(2,) the median |S_u|, |S_v| over a SPEED_GRID² grid of the face's (u,v) bounds (of uv (n, 2) where unknown)."""
+    box = surface.bounds if surface.bounds is not None else (*np.sort(uv[[0, -1], 0]), *np.sort(uv[[0, -1], 1]))
+    g = np.linspace(0.05, 0.95, SPEED_GRID)
+    u, v = np.meshgrid(box[0] + g * (box[1] - box[0]), box[2] + g * (box[3] - box[2]))
+    grid = np.stack([u.ravel(), v.ravel()], axis=1)
+    return np.median(np.stack(surface_speeds(surface, grid, grid), axis=1), axis=0)
 
 
 def has_pole(face: TopoDS_Face) -> bool:

@@ -62,6 +62,62 @@ def second_form(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.
     return tuple(np.nan_to_num(np.einsum("ij,ij->i", normal, s)) for s in (s_uu, s_uv, s_vv))  # type: ignore[return-value]
 
 
+def _quadratic_terms(p: np.ndarray) -> np.ndarray:
+    """(3, n) ½x_a², x_a·x_c, ½x_c² at points p (n, 2)."""
+    return np.stack([p[:, 0] ** 2 / 2, p[:, 0] * p[:, 1], p[:, 1] ** 2 / 2])
+
+
+def _reference_terms(apex: float, order: int = 6) -> np.ndarray:
+    """(3, 2k) the interpolation error of ½x_a², x_a·x_c, ½x_c² at the order-k barycentric grid (k points) of the
+    triangles (−½, 0), (½, 0), (0, ±apex) (a unit segment along a, its apex across it on either side)."""
+    i, j = np.meshgrid(np.arange(order + 1), np.arange(order + 1))
+    keep = i + j <= order
+    lam = np.stack([i[keep], j[keep], order - i[keep] - j[keep]], axis=1) / order
+    out = []
+    for side in (1.0, -1.0):
+        corners = np.array([[-0.5, 0.0], [0.5, 0.0], [0.0, side * apex]])
+        x = lam @ corners
+        at_corners, at_x = _quadratic_terms(corners), _quadratic_terms(x)
+        out.append(at_corners @ lam.T - at_x)
+    return np.concatenate(out, axis=1)
+
+
+def standing_error(surface: Surface, uv: np.ndarray, step: np.ndarray, floor: np.ndarray, along: np.ndarray,
+                   apex: float) -> np.ndarray:
+    """(n,) the chordal error (mm per mm²) of a triangle standing on a unit segment along `along` (n, 3) at uv
+    (n, 2), its apex `apex` across it, on either side: the largest |Σλᵢ q(Pᵢ) − q(Σλᵢ Pᵢ)| over the order-6 grid,
+    q the surface's second form q(x) = ½ xᵀ H x in the tangent frame (a along the segment, c = n̂ × a; H from
+    II(d) = L du² + 2M du dv + N dv², (du, dv) solving the first form for d); a segment s long gives s² times it.
+    Both forms by central differences with steps (n, 2) (a secant curvature at that scale: a fold far smaller than
+    it is not seen), E and G at least floor² (2,) speeds (where a parametrisation's speed vanishes along a side the
+    ratio of the two forms is noise); 0 where the tangents are parallel (a pole)."""
+    p = surface.evaluate((uv[:, None, :] + _OFFSETS[None] * step[:, None, :]).reshape(-1, 2)).reshape(len(uv), 9, 3)
+    hu, hv = step[:, :1], step[:, 1:]
+    su, sv = (p[:, 1] - p[:, 2]) / (2 * hu), (p[:, 3] - p[:, 4]) / (2 * hv)
+    normal = cross(su, sv)
+    size = np.linalg.norm(normal, axis=1, keepdims=True)
+    normal /= np.where(size > 0, size, 1.0)
+    L, M, N = (np.einsum("ij,ij->i", normal, d) for d in (
+        (p[:, 1] - 2 * p[:, 0] + p[:, 2]) / hu**2, (p[:, 5] - p[:, 6] - p[:, 7] + p[:, 8]) / (4 * hu * hv),
+        (p[:, 3] - 2 * p[:, 0] + p[:, 4]) / hv**2))
+    E, F, G = (su * su).sum(1) + floor[0] ** 2, (su * sv).sum(1), (sv * sv).sum(1) + floor[1] ** 2
+    W = E * G - F * F
+    ok = (W > 1e-12 * E * G) & (size[:, 0] > 0)
+    W = np.where(ok, W, 1.0)
+
+    def second(d: np.ndarray) -> np.ndarray:
+        x, y = np.einsum("ij,ij->i", su, d), np.einsum("ij,ij->i", sv, d)
+        du, dv = (G * x - F * y) / W, (E * y - F * x) / W
+        return L * du * du + 2 * M * du * dv + N * dv * dv
+
+    a = along - np.einsum("ij,ij->i", along, normal)[:, None] * normal
+    a /= np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-300)
+    c = cross(normal, a)
+    h_aa, h_cc, h_ac = second(a), second(c), (second(a + c) - second(a - c)) / 4
+    error = np.stack([h_aa, h_ac, h_cc], axis=1) @ _reference_terms(apex)
+    return np.where(ok, np.abs(error).max(axis=1), 0.0)
+
+
 def _ranks(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(owner, rank) each (Σ counts,): item i of `counts` (n,) repeated counts[i] times, and 0 … counts[i] − 1."""
     owner = np.repeat(np.arange(len(counts)), counts)
