@@ -28,6 +28,8 @@ from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import quality_estimate, refuse_quality_too_large
 from amprep.geometry.meshing.shared_edges import (
+    ANALYTIC,
+    ROOM,
     collapse_short_edges,
     discretize_missing_edges,
     edge_length,
@@ -137,8 +139,11 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     points of their old mesh); every edge is discretised first, before faces are meshed apart from each other."""
     target = f.tol * ENFORCE_MARGIN
     remesh = sorted(i for i in todo if f.surfaces[i] is not None)  # the lattices plan in face order
-    for i in remesh:
-        discretize_missing_edges(f.model.faces[i], f.topo, target, f.params.angular)
+    # the quality mesher's free-form faces first: their edges' chords at ROOM × the target leave their triangles
+    # room to stand on them (shared_edges.bend_sizes); an edge keeps the discretisation its first face gave it
+    free = [i for i in remesh if f.params.quality and f.surfaces[i].surface_type not in ANALYTIC]  # type: ignore[union-attr]
+    for i in free + sorted(set(remesh) - set(free)):
+        discretize_missing_edges(f.model.faces[i], f.topo, target * (ROOM if i in free else 1.0), f.params.angular)
     if f.params.quality:
         loops, planned = _plan_quality(f, remesh, target)
     redone = set(remesh)

@@ -145,6 +145,9 @@ APEX = 0.29
 #: and where that triangle's error would be over this × the target (the rest is room for the triangles the face's
 #: interior actually gives it)
 ROOM = 0.8
+#: a segment up to this much longer than that is not cut (a cut would double it; its triangle then stays under
+#: ROOM × (1 + BEND_SLACK)² ≈ 0.97 × the target)
+BEND_SLACK = 0.1
 #: the curvature there is taken over steps of this × the target on the surface (a fold far finer, as a fitted
 #: B-spline's overshoot by 1 µm along a side where its speed vanishes, is not the face's shape)
 STENCIL = 2.0
@@ -263,12 +266,13 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
             size = np.minimum(at_vertex[v1] + GROWTH * mid, at_vertex[v2] + GROWTH * (along[-1] - mid))
             if ei in straight:
                 size = np.full_like(seg, np.inf)
-            elif ei in bent:
-                size = np.minimum(size, bend_sizes(edge, topo.edge_params[ei], bent[ei], target))
             if np.isfinite(limit) and limit > 0:
                 size = np.minimum(size, limit)
-            size = np.maximum(size, floor)
-            parts = np.minimum(np.ceil(seg / np.maximum(size, 1e-12)), MAX_PARTS).astype(np.int64)
+            parts = np.ceil(seg / np.maximum(size, max(floor, 1e-12)))
+            if ei in bent and ei not in straight:  # a segment a little over keeps its target (ROOM): not halved
+                bend = np.maximum(bend_sizes(edge, topo.edge_params[ei], bent[ei], target), floor)
+                parts = np.maximum(parts, np.ceil(seg / np.maximum(bend, 1e-12) - BEND_SLACK))
+            parts = np.minimum(parts, MAX_PARTS).astype(np.int64)
             if (parts > 1).any() and ei not in frozen:
                 topo.edge_params[ei] = split_segments(topo.edge_params[ei], parts)
 
