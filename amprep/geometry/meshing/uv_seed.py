@@ -48,18 +48,26 @@ _OFFSETS = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], 
 _CORNERS = np.array([[-1, -1], [1, -1], [-1, 1], [1, 1]], float) * 0.5
 
 
-def second_form(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(L, M, N) each (n,): n·S_uu, n·S_uv, n·S_vv at uv (n, 2) by central differences with steps (2,) (0 where
-    the normal is undefined, as at a pole)."""
-    hu, hv = float(step[0]), float(step[1])
-    p = surface.evaluate((uv[:, None, :] + _OFFSETS[None] * [hu, hv]).reshape(-1, 2)).reshape(len(uv), 9, 3)
+def _forms(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(S_u, S_v (n, 3), |n| (n,), L, M, N (n,)) at uv (n, 2) by central differences with steps (2,) or (n, 2):
+    |n| the length of (S(u + h) − S(u − h)) × (S(v + h) − S(v − h)), L, M, N = n̂·S_uu, n̂·S_uv, n̂·S_vv."""
+    step = np.broadcast_to(np.asarray(step, float), uv.shape)
+    hu, hv = step[:, :1], step[:, 1:]
+    p = surface.evaluate((uv[:, None, :] + _OFFSETS[None] * step[:, None, :]).reshape(-1, 2)).reshape(len(uv), 9, 3)
     normal = cross(p[:, 1] - p[:, 2], p[:, 3] - p[:, 4])
     length = np.linalg.norm(normal, axis=1)
     normal /= np.where(length > 0, length, 1.0)[:, None]
     s_uu = (p[:, 1] - 2 * p[:, 0] + p[:, 2]) / hu**2
     s_vv = (p[:, 3] - 2 * p[:, 0] + p[:, 4]) / hv**2
     s_uv = (p[:, 5] - p[:, 6] - p[:, 7] + p[:, 8]) / (4 * hu * hv)
-    return tuple(np.nan_to_num(np.einsum("ij,ij->i", normal, s)) for s in (s_uu, s_uv, s_vv))  # type: ignore[return-value]
+    L, M, N = (np.einsum("ij,ij->i", normal, d) for d in (s_uu, s_uv, s_vv))
+    return (p[:, 1] - p[:, 2]) / (2 * hu), (p[:, 3] - p[:, 4]) / (2 * hv), length, L, M, N
+
+
+def second_form(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(L, M, N) each (n,): n·S_uu, n·S_uv, n·S_vv at uv (n, 2) by central differences with steps (2,) (0 where
+    the normal is undefined, as at a pole)."""
+    return tuple(np.nan_to_num(x) for x in _forms(surface, uv, step)[3:])  # type: ignore[return-value]
 
 
 def _quadratic_terms(p: np.ndarray) -> np.ndarray:
@@ -91,18 +99,12 @@ def standing_error(surface: Surface, uv: np.ndarray, step: np.ndarray, floor: np
     Both forms by central differences with steps (n, 2) (a secant curvature at that scale: a fold far smaller than
     it is not seen), E and G at least floor² (2,) speeds (where a parametrisation's speed vanishes along a side the
     ratio of the two forms is noise); 0 where the tangents are parallel (a pole)."""
-    p = surface.evaluate((uv[:, None, :] + _OFFSETS[None] * step[:, None, :]).reshape(-1, 2)).reshape(len(uv), 9, 3)
-    hu, hv = step[:, :1], step[:, 1:]
-    su, sv = (p[:, 1] - p[:, 2]) / (2 * hu), (p[:, 3] - p[:, 4]) / (2 * hv)
+    su, sv, size, L, M, N = _forms(surface, uv, step)
     normal = cross(su, sv)
-    size = np.linalg.norm(normal, axis=1, keepdims=True)
-    normal /= np.where(size > 0, size, 1.0)
-    L, M, N = (np.einsum("ij,ij->i", normal, d) for d in (
-        (p[:, 1] - 2 * p[:, 0] + p[:, 2]) / hu**2, (p[:, 5] - p[:, 6] - p[:, 7] + p[:, 8]) / (4 * hu * hv),
-        (p[:, 3] - 2 * p[:, 0] + p[:, 4]) / hv**2))
+    normal /= np.where(size > 0, np.linalg.norm(normal, axis=1), 1.0)[:, None]
     E, F, G = (su * su).sum(1) + floor[0] ** 2, (su * sv).sum(1), (sv * sv).sum(1) + floor[1] ** 2
     W = E * G - F * F
-    ok = (W > 1e-12 * E * G) & (size[:, 0] > 0)
+    ok = (W > 1e-12 * E * G) & (size > 0)
     W = np.where(ok, W, 1.0)
 
     def second(d: np.ndarray) -> np.ndarray:
