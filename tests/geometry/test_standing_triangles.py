@@ -21,6 +21,7 @@ from OCP.TColgp import TColgp_Array2OfPnt
 
 from amprep.geometry.cad.read import model_from_shape
 from amprep.geometry.cad.surfaces import surface_of, uv_extent
+from amprep.geometry.measure.regularity import min_angles
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 from amprep.geometry.meshing.uv_seed import standing_error
@@ -76,11 +77,7 @@ def _standing_angles(mesh, face: int, shared: np.ndarray) -> np.ndarray:  # type
     tris = mesh.triangles[mesh.face_ids == face]
     on = shared[tris]
     standing = tris[(on[:, [0, 1, 2]] & on[:, [1, 2, 0]]).any(axis=1)]
-    c = mesh.vertices[standing]
-    sides = np.stack([np.linalg.norm(c[:, (k + 1) % 3] - c[:, (k + 2) % 3], axis=1) for k in range(3)], axis=1)
-    s = np.sort(sides, axis=1)
-    cos = (s[:, 1] ** 2 + s[:, 2] ** 2 - s[:, 0] ** 2) / (2 * s[:, 1] * s[:, 2])
-    return np.degrees(np.arccos(np.clip(cos, -1, 1)))
+    return np.degrees(min_angles(mesh.vertices[standing]))
 
 
 @pytest.mark.parametrize("build", [_gentle_beside_curved, _cylinder_beside_curved])

@@ -141,8 +141,8 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     remesh = sorted(i for i in todo if f.surfaces[i] is not None)  # the lattices plan in face order
     # the quality mesher's free-form faces first: their edges' chords at ROOM × the target leave their triangles
     # room to stand on them (shared_edges.bend_sizes); an edge keeps the discretisation its first face gave it
-    free = [i for i in remesh if f.params.quality and f.surfaces[i].surface_type not in ANALYTIC]  # type: ignore[union-attr]
-    for i in free + sorted(set(remesh) - set(free)):
+    free = {i for i in remesh if f.params.quality and f.surfaces[i].surface_type not in ANALYTIC}  # type: ignore[union-attr]
+    for i in sorted(remesh, key=lambda i: i not in free):
         discretize_missing_edges(f.model.faces[i], f.topo, target * (ROOM if i in free else 1.0), f.params.angular)
     if f.params.quality:
         loops, planned = _plan_quality(f, remesh, target)

@@ -221,8 +221,8 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
     segment is longer than GRADE × the narrower width of the faces it bounds, or than GROWTH × its distance from the
     nearer end plus the shortest segment at that end's vertex (over every edge there): a long segment beside a
     short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends;
-    not on a straight edge of a free-form face); and, with a `target`, than the chord a free-form face it bounds keeps
-    within it across its most curved direction there (bend_sizes). No size is set
+    not on a straight edge of a free-form face); and, with a `target`, than a triangle of a free-form face it bounds
+    can stand on within it (bend_sizes; not on such a straight edge). No size is set
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
     bent: dict[int, list[tuple[TopoDS_Face, Surface]]] = {}
@@ -280,8 +280,8 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
 def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_Face, Surface]],
                target: float) -> np.ndarray:
     """(n−1,) the longest each segment of an edge (params (n,)) may be for a triangle of APEX height to stand on it
-    within the target on each face: √(8 target / b) with b uv_seed.side_bend at a quarter, half and three quarters
-    of it, taken at the segment's own scale (steps of its length in (u,v), the stencil moved inside the face's
+    within ROOM × the target on each face: √(ROOM target / e) with e uv_seed.standing_error at a quarter, half and
+    three quarters of it (differences STENCIL × the target apart on the surface, the stencil moved inside the face's
     bounds). On a longer segment the only triangles that keep the target are slivers tilted off the surface, which
     a move of their corners by the B-rep's gap breaks."""
     t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()

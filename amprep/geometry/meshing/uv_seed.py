@@ -7,12 +7,15 @@ square, the cells no longer than twice their width there."""
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.progress import within_budget
 from amprep.geometry.core.vectors import cross
+from amprep.geometry.measure.chordal import barycentric_grid
 from amprep.geometry.meshing.uv_cdt import inside_loops, surface_speeds
 
 #: a cell that needs at most this many parts per direction is cut into them; one that needs more into about
@@ -49,8 +52,8 @@ _CORNERS = np.array([[-1, -1], [1, -1], [-1, 1], [1, 1]], float) * 0.5
 
 
 def _forms(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(S_u, S_v (n, 3), |n| (n,), L, M, N (n,)) at uv (n, 2) by central differences with steps (2,) or (n, 2):
-    |n| the length of (S(u + h) − S(u − h)) × (S(v + h) − S(v − h)), L, M, N = n̂·S_uu, n̂·S_uv, n̂·S_vv."""
+    """(S_u, S_v, n̂ (n, 3), |n| (n,), L, M, N (n,)) at uv (n, 2) by central differences with steps (2,) or (n, 2):
+    n = (S(u + h) − S(u − h)) × (S(v + h) − S(v − h)) (n̂ = 0 where |n| = 0), L, M, N = n̂·S_uu, n̂·S_uv, n̂·S_vv."""
     step = np.broadcast_to(np.asarray(step, float), uv.shape)
     hu, hv = step[:, :1], step[:, 1:]
     p = surface.evaluate((uv[:, None, :] + _OFFSETS[None] * step[:, None, :]).reshape(-1, 2)).reshape(len(uv), 9, 3)
@@ -61,13 +64,13 @@ def _forms(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.ndarr
     s_vv = (p[:, 3] - 2 * p[:, 0] + p[:, 4]) / hv**2
     s_uv = (p[:, 5] - p[:, 6] - p[:, 7] + p[:, 8]) / (4 * hu * hv)
     L, M, N = (np.einsum("ij,ij->i", normal, d) for d in (s_uu, s_uv, s_vv))
-    return (p[:, 1] - p[:, 2]) / (2 * hu), (p[:, 3] - p[:, 4]) / (2 * hv), length, L, M, N
+    return (p[:, 1] - p[:, 2]) / (2 * hu), (p[:, 3] - p[:, 4]) / (2 * hv), normal, length, L, M, N
 
 
 def second_form(surface: Surface, uv: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(L, M, N) each (n,): n·S_uu, n·S_uv, n·S_vv at uv (n, 2) by central differences with steps (2,) (0 where
     the normal is undefined, as at a pole)."""
-    return tuple(np.nan_to_num(x) for x in _forms(surface, uv, step)[3:])  # type: ignore[return-value]
+    return tuple(np.nan_to_num(x) for x in _forms(surface, uv, step)[4:])  # type: ignore[return-value]
 
 
 def _quadratic_terms(p: np.ndarray) -> np.ndarray:
@@ -75,19 +78,19 @@ def _quadratic_terms(p: np.ndarray) -> np.ndarray:
     return np.stack([p[:, 0] ** 2 / 2, p[:, 0] * p[:, 1], p[:, 1] ** 2 / 2])
 
 
+@lru_cache(maxsize=8)
 def _reference_terms(apex: float, order: int = 6) -> np.ndarray:
-    """(3, 2k) the interpolation error of ½x_a², x_a·x_c, ½x_c² at the order-k barycentric grid (k points) of the
-    triangles (−½, 0), (½, 0), (0, ±apex) (a unit segment along a, its apex across it on either side)."""
-    i, j = np.meshgrid(np.arange(order + 1), np.arange(order + 1))
-    keep = i + j <= order
-    lam = np.stack([i[keep], j[keep], order - i[keep] - j[keep]], axis=1) / order
+    """(3, 2k) the interpolation error of ½x_a², x_a·x_c, ½x_c² at the order-k barycentric grid (k points,
+    measure.chordal.barycentric_grid) of the triangles (−½, 0), (½, 0), (0, ±apex) (a unit segment along a, its apex
+    across it on either side)."""
+    lam = barycentric_grid(order)
     out = []
     for side in (1.0, -1.0):
         corners = np.array([[-0.5, 0.0], [0.5, 0.0], [0.0, side * apex]])
-        x = lam @ corners
-        at_corners, at_x = _quadratic_terms(corners), _quadratic_terms(x)
-        out.append(at_corners @ lam.T - at_x)
-    return np.concatenate(out, axis=1)
+        out.append(_quadratic_terms(corners) @ lam.T - _quadratic_terms(lam @ corners))
+    terms = np.concatenate(out, axis=1)
+    terms.flags.writeable = False
+    return terms
 
 
 def standing_error(surface: Surface, uv: np.ndarray, step: np.ndarray, floor: np.ndarray, along: np.ndarray,
@@ -99,9 +102,7 @@ def standing_error(surface: Surface, uv: np.ndarray, step: np.ndarray, floor: np
     Both forms by central differences with steps (n, 2) (a secant curvature at that scale: a fold far smaller than
     it is not seen), E and G at least floor² (2,) speeds (where a parametrisation's speed vanishes along a side the
     ratio of the two forms is noise); 0 where the tangents are parallel (a pole)."""
-    su, sv, size, L, M, N = _forms(surface, uv, step)
-    normal = cross(su, sv)
-    normal /= np.where(size > 0, np.linalg.norm(normal, axis=1), 1.0)[:, None]
+    su, sv, normal, size, L, M, N = _forms(surface, uv, step)
     E, F, G = (su * su).sum(1) + floor[0] ** 2, (su * sv).sum(1), (sv * sv).sum(1) + floor[1] ** 2
     W = E * G - F * F
     ok = (W > 1e-12 * E * G) & (size > 0)
