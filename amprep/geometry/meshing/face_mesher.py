@@ -26,6 +26,7 @@ from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.shared_edges import ANALYTIC, discretize_missing_edges, has_pole
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
+    MIN_SPACING,
     apart,
     insertion_points,
     inside_loops,
@@ -148,9 +149,9 @@ def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface
     loops = boundary_loops(face, topo, tolerance, angular)
     if not loops:
         raise AmprepError(ErrorCode.MESHING_FAILED, f"face {face_id} has no boundary")
-    b_uv = np.concatenate([lp["uv"] for lp in loops])
+    length_scale = scale = metric_scale(surface, np.concatenate([lp["uv"] for lp in loops]))
+    b_uv, b_vertex, b_edge, b_param, segments = _boundary_nodes(loops, length_scale, tolerance)
     nb = len(b_uv)
-    length_scale = scale = metric_scale(surface, b_uv)
     pole = has_pole(face)
     # curvature decides the interior points, in its own space; not at a pole or apex, where a line of (u,v) is one
     # point: (u,v) cells there misjudge lengths, and the global re-triangulation works on an earlier mesh's points
@@ -166,7 +167,6 @@ def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface
             if pole and pole_rows:  # points near a pole's line in (u,v) would join its nodes either side of others
                 seeds = clear_poles(seeds, pole_runs(loops), scale, [lp["uv"] for lp in loops])
     spacing = min_spacing(tolerance, scale, length_scale)
-    segments = _loop_segments(loops)
     scaled_loops = [lp["uv"] * scale for lp in loops]
     pts = b_uv * scale
     tris = triangulate_pslg(pts, segments)
@@ -186,7 +186,7 @@ def _mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface
     xyz = surface.evaluate(pts / scale)
     err = triangle_chordal_error(xyz[tris], (pts / scale)[tris], surface, order, affine=surface.affine,
                                  stop=tolerance)
-    node_vertex, node_edge, node_param = _node_keys(loops, len(pts))
+    node_vertex, node_edge, node_param = _node_keys(b_vertex, b_edge, b_param, len(pts))
     # CDT triangles are counter-clockwise in (u,v): outward when the surface normal S_u × S_v points out
     flip = winds_inward(face)
     method = "quality" if quality else "fallback"
@@ -222,24 +222,42 @@ def _finish(patch: FacePatch, surface: Surface, tolerance: float, order: int, qu
     return flip_flat_triangles(patch, surface, tolerance, order, min_area)
 
 
-def _loop_segments(loops: list[dict]) -> np.ndarray:  # type: ignore[type-arg]
-    """(s, 2) the closed loops' segments as indices into their concatenated nodes."""
-    seg, start = [], 0
+def _boundary_nodes(loops: list[dict], length_scale: np.ndarray,  # type: ignore[type-arg]
+                    tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(uv (nb, 2), vertex, edge, param each (nb,), segments (s, 2) into them): the closed loops' nodes and segments,
+    with a face's pinch made one node: the nodes of one B-rep vertex met twice (two loops that touch there, or one
+    loop through it twice), outside a pole's run, whose (u,v) · length_scale (2,) lie within MIN_SPACING × tolerance
+    (the copies of a seam vertex lie a period apart). Triangle needs them one point: their pcurves' ends differ by
+    rounding, and two segments from points 1e-16 apart cross."""
+    uv = np.concatenate([lp["uv"] for lp in loops])
+    vertex = np.concatenate([lp["vertex"] for lp in loops])
+    seg, start, run = [], 0, []
     for lp in loops:
         idx = np.arange(start, start + len(lp["uv"]))
         seg.append(np.stack([idx, np.roll(idx, -1)], axis=1))
+        v = lp["vertex"]
+        run.append((v >= 0) & ((v == np.roll(v, 1)) | (v == np.roll(v, -1))))
         start += len(idx)
-    return np.concatenate(seg)
+    segments, first = np.concatenate(seg), np.arange(len(uv))
+    candidates = np.flatnonzero((vertex >= 0) & ~np.concatenate(run))
+    for v in np.unique(vertex[candidates]).tolist():
+        nodes = candidates[vertex[candidates] == v]
+        for k in range(1, len(nodes)):
+            near = np.linalg.norm((uv[nodes[:k]] - uv[nodes[k]]) * length_scale, axis=1) <= MIN_SPACING * tolerance
+            if near.any():
+                first[nodes[k]] = first[nodes[:k][near][0]]
+    keep = first == np.arange(len(uv))
+    compact = np.cumsum(keep) - 1
+    keys = [np.concatenate([lp[k] for lp in loops])[keep] for k in ("vertex", "edge", "param")]
+    return uv[keep], keys[0], keys[1], keys[2], compact[first[segments]]
 
 
-def _node_keys(loops: list[dict], n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[type-arg]
-    """(vertex, edge, param) each (n,) of n nodes whose first ones are the loops' boundary nodes (−1/nan after)."""
-    nb = sum(len(lp["uv"]) for lp in loops)
-    vertex, edge, param = np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.full(n, np.nan)
-    vertex[:nb] = np.concatenate([lp["vertex"] for lp in loops])
-    edge[:nb] = np.concatenate([lp["edge"] for lp in loops])
-    param[:nb] = np.concatenate([lp["param"] for lp in loops])
-    return vertex, edge, param
+def _node_keys(vertex: np.ndarray, edge: np.ndarray, param: np.ndarray,
+               n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertex, edge, param) each (n,) of n nodes whose first ones are the boundary nodes' (−1/nan after)."""
+    k = n - len(vertex)
+    return (np.concatenate([vertex, np.full(k, -1, np.int64)]), np.concatenate([edge, np.full(k, -1, np.int64)]),
+            np.concatenate([param, np.full(k, np.nan)]))
 
 
 def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segments: np.ndarray, holes: np.ndarray,
