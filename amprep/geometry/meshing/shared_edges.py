@@ -139,11 +139,11 @@ MAX_PARTS = 64
 NEEDLE = 95.0
 #: a face narrower (face_width) than this × the chord tolerance has no width: its edges are not cut
 SLIVER = 1e-3
-#: a boundary segment of a free-form face is cut where a triangle standing on it with this height × its length
+#: a boundary segment of a curved face is cut where a triangle standing on it with this height × its length
 #: would be over the target (bend_sizes): tan 30° / 2, Triangle's 30° minimum angle at both ends of the segment
 APEX = 0.29
-#: and where that triangle's error would be over this × the target (the rest is room for the triangles the face's
-#: interior actually gives it)
+#: and where that triangle's error would be over this × the target on a free-form face (the rest is room for the
+#: triangles the face's interior actually gives it; an analytic face's triangles get the whole target)
 ROOM = 0.8
 #: a segment up to this much longer than that is not cut (a cut would double it; its triangle then stays under
 #: ROOM × (1 + BEND_SLACK)² ≈ 0.97 × the target)
@@ -221,7 +221,7 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
     segment is longer than GRADE × the narrower width of the faces it bounds, or than GROWTH × its distance from the
     nearer end plus the shortest segment at that end's vertex (over every edge there): a long segment beside a
     short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends;
-    not on a straight edge of a free-form face); and, with a `target`, than a triangle of a free-form face it bounds
+    not on a straight edge of a free-form face); and, with a `target`, than a triangle of a curved face it bounds
     can stand on within it (bend_sizes; not on such a straight edge). No size is set
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
     cap: dict[int, tuple[float, object]] = {}
@@ -246,7 +246,7 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
             limit = GRADE * w if w >= floor else min(GRADE * floor, NEEDLE * w)
             if ei in topo.edge_params and (ei not in cap or limit < cap[ei][0]):
                 cap[ei] = (limit, edge)
-            if target > 0 and kind not in ANALYTIC:
+            if target > 0 and kind != "plane":
                 bent.setdefault(ei, []).append((face, surface))
     for _ in range(2):
         points = {ei: edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
@@ -280,8 +280,9 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
 def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_Face, Surface]],
                target: float) -> np.ndarray:
     """(n−1,) the longest each segment of an edge (params (n,)) may be for a triangle of APEX height to stand on it
-    within ROOM × the target on each face: √(ROOM target / e) with e uv_seed.standing_error at a quarter, half and
-    three quarters of it (differences STENCIL × the target apart on the surface, the stencil moved inside the face's
+    within ROOM × the target on each free-form face, the target on an analytic one (its edges are discretised at the
+    target, and a circle's segment then has its own chord's error): √(room target / e) with e
+    uv_seed.standing_error at a quarter, half and three quarters of it (differences STENCIL × the target apart on the surface, the stencil moved inside the face's
     bounds). On a longer segment the only triangles that keep the target are slivers tilted off the surface, which
     a move of their corners by the B-rep's gap breaks."""
     t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()
@@ -298,10 +299,11 @@ def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_F
         if surface.bounds is not None:  # the stencil inside the face: past its bounds a surface may be clamped
             u1, u2, v1, v2 = surface.bounds
             uv = np.clip(uv, np.array([u1, v1]) + step, np.array([u2, v2]) - step)
-        bend = np.maximum(bend, standing_error(surface, uv, step, floor, chord, APEX))
+        room = ROOM if surface.surface_type not in ANALYTIC else 1.0  # an analytic face's edges are at the target
+        bend = np.maximum(bend, standing_error(surface, uv, step, floor, chord, APEX) / room)
     bend = bend.reshape(-1, 3).max(axis=1)
     with np.errstate(divide="ignore"):
-        return np.where(bend > 0, np.sqrt(ROOM * target / bend), np.inf)
+        return np.where(bend > 0, np.sqrt(target / bend), np.inf)
 
 
 def _median_speeds(surface: Surface, uv: np.ndarray) -> np.ndarray:
