@@ -281,10 +281,10 @@ def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_F
                target: float) -> np.ndarray:
     """(n−1,) the longest each segment of an edge (params (n,)) may be for a triangle of APEX height to stand on it
     within ROOM × the target on each free-form face, the target on an analytic one (its edges are discretised at the
-    target, and a circle's segment then has its own chord's error): √(room target / e) with e
-    uv_seed.standing_error at a quarter, half and three quarters of it (differences STENCIL × the target apart on the surface, the stencil moved inside the face's
-    bounds). On a longer segment the only triangles that keep the target are slivers tilted off the surface, which
-    a move of their corners by the B-rep's gap breaks."""
+    target, and a circle's segment then has its own chord's error): √(room target / e) with e uv_seed.standing_error
+    at a quarter, half and three quarters of it (differences STENCIL × the target apart on the surface, the stencil
+    moved inside the face's bounds). On a longer segment the only triangles that keep the target are slivers tilted
+    off the surface, which a move of their corners by the B-rep's gap breaks."""
     t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()
     chord = np.repeat(np.diff(edge_points(edge, params), axis=0), 3, axis=0)
     bend = np.zeros(len(t))
