@@ -15,7 +15,7 @@ from OCP.TopoDS import TopoDS_Edge, TopoDS_Face
 from amprep.geometry.cad.surfaces import Surface, uv_extent
 from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.vectors import cross
-from amprep.geometry.meshing.uv_cdt import MIN_SPACING, surface_speeds
+from amprep.geometry.meshing.uv_cdt import MIN_SPACING, difference_step, surface_speeds
 from amprep.geometry.meshing.uv_seed import LOCAL_FLOOR, standing_error
 
 
@@ -153,6 +153,7 @@ BEND_SLACK = 0.1
 STENCIL = 2.0
 #: the surface's typical speeds (bend_sizes' floor of the first form) are the median over this many² points
 SPEED_GRID = 5
+_UNIT = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
 #: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
 UV_STRAIGHT = 1e-6
 
@@ -251,6 +252,9 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
     for _ in range(2):
         points = {ei: edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
                   if len(topo.edge_params[ei]) >= 2}
+        standing = [ei for ei in points if ei in bent and ei not in straight]
+        bends = dict(zip(standing, bend_sizes_many(
+            [(cap[ei][1], topo.edge_params[ei], points[ei], bent[ei]) for ei in standing], target), strict=True))
         at_vertex: dict[int, float] = {}
         for ei, pts in points.items():
             seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
@@ -269,8 +273,8 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
             if np.isfinite(limit) and limit > 0:
                 size = np.minimum(size, limit)
             parts = np.ceil(seg / np.maximum(size, max(floor, 1e-12)))
-            if ei in bent and ei not in straight:  # a segment a little over keeps its target (ROOM): not halved
-                bend = np.maximum(bend_sizes(edge, topo.edge_params[ei], bent[ei], target), floor)
+            if ei in bends:  # a segment a little over keeps its target (ROOM): not halved
+                bend = np.maximum(bends[ei], floor)
                 parts = np.maximum(parts, np.ceil(seg / np.maximum(bend, 1e-12) - BEND_SLACK))
             parts = np.minimum(parts, MAX_PARTS).astype(np.int64)
             if (parts > 1).any() and ei not in frozen:
@@ -285,25 +289,43 @@ def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_F
     at a quarter, half and three quarters of it (differences STENCIL × the target apart on the surface, the stencil
     moved inside the face's bounds). On a longer segment the only triangles that keep the target are slivers tilted
     off the surface, which a move of their corners by the B-rep's gap breaks."""
-    t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()
-    chord = np.repeat(np.diff(edge_points(edge, params), axis=0), 3, axis=0)
-    bend = np.zeros(len(t))
-    for face, surface in faces:
-        pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-        if pcurve is None:
-            continue
-        uv = np.array([pcurve.Value(float(x)).Coord() for x in t]).reshape(-1, 2)
-        floor = LOCAL_FLOOR * _median_speeds(surface, uv)
-        speed = np.maximum(np.stack(surface_speeds(surface, uv, uv), axis=1), floor)
-        step = np.minimum(STENCIL * target / np.maximum(speed, 1e-300), uv_extent(surface) / 8)
+    return bend_sizes_many([(edge, params, edge_points(edge, params), faces)], target)[0]
+
+
+def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[tuple[TopoDS_Face, Surface]]]],
+                    target: float) -> list[np.ndarray]:
+    """bend_sizes of each (edge, params (n,), its points there (n, 3), its faces), the points of all the edges on one
+    face evaluated on its surface together; each (edge, face) pair keeps its own difference steps and floor."""
+    out = [np.zeros(3 * (len(params) - 1)) for _, params, _, _ in edges]
+    by_face: dict[int, tuple[TopoDS_Face, Surface, list]] = {}  # type: ignore[type-arg]
+    for k, (edge, params, points, faces) in enumerate(edges):
+        t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()
+        chord = np.repeat(np.diff(points, axis=0), 3, axis=0)
+        for face, surface in faces:
+            pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+            if pcurve is not None:
+                uv = np.array([pcurve.Value(float(x)).Coord() for x in t]).reshape(-1, 2)
+                by_face.setdefault(id(surface), (face, surface, []))[2].append((k, uv, chord))
+    for _, surface, pairs in by_face.values():
+        median = _median_speeds(surface, pairs[0][1]) if surface.bounds is not None else None
+        uv = np.concatenate([uv for _, uv, _ in pairs])
+        floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(
+            median if median is not None else _median_speeds(surface, q), q.shape) for _, q, _ in pairs])
+        h = np.concatenate([np.full(len(q), difference_step(q)) for _, q, _ in pairs])[:, None]
+        p = surface.evaluate(uv)
+        speeds = np.stack([np.linalg.norm(surface.evaluate(uv + h * d) - p, axis=1) / h[:, 0] for d in _UNIT], axis=1)
+        step = np.minimum(STENCIL * target / np.maximum(np.maximum(speeds, floor), 1e-300), uv_extent(surface) / 8)
         if surface.bounds is not None:  # the stencil inside the face: past its bounds a surface may be clamped
             u1, u2, v1, v2 = surface.bounds
             uv = np.clip(uv, np.array([u1, v1]) + step, np.array([u2, v2]) - step)
         room = ROOM if surface.surface_type not in ANALYTIC else 1.0  # an analytic face's edges are at the target
-        bend = np.maximum(bend, standing_error(surface, uv, step, floor, chord, APEX) / room)
-    bend = bend.reshape(-1, 3).max(axis=1)
+        error = standing_error(surface, uv, step, floor, np.concatenate([c for _, _, c in pairs]), APEX) / room
+        start = 0
+        for k, q, _ in pairs:
+            out[k] = np.maximum(out[k], error[start:start + len(q)])
+            start += len(q)
     with np.errstate(divide="ignore"):
-        return np.where(bend > 0, np.sqrt(target / bend), np.inf)
+        return [np.where(b > 0, np.sqrt(target / b), np.inf) for b in (b.reshape(-1, 3).max(axis=1) for b in out)]
 
 
 def _median_speeds(surface: Surface, uv: np.ndarray) -> np.ndarray:

@@ -16,14 +16,14 @@ MAX_ROUNDS = 40
 MIN_SPACING = 0.01
 
 
-def _difference_step(uv: np.ndarray) -> float:
+def difference_step(uv: np.ndarray) -> float:
     """The forward-difference step of surface_speeds and surface_tangents: 1e-6 × the extent of uv (n, 2)."""
     return 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-9)
 
 
 def surface_speeds(surface: Surface, sample: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(|∂S/∂u|, |∂S/∂v|) each (k,) at sample (k, 2), by forward differences of 1e-6 × the extent of uv (n, 2)."""
-    h = _difference_step(uv)
+    h = difference_step(uv)
     p = surface.evaluate(sample)
     du = np.linalg.norm(surface.evaluate(sample + [h, 0]) - p, axis=1) / h
     dv = np.linalg.norm(surface.evaluate(sample + [0, h]) - p, axis=1) / h
@@ -34,7 +34,7 @@ def surface_tangents(surface: Surface, sample: np.ndarray, at: np.ndarray,
                      uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(∂S/∂u, ∂S/∂v) each (k, 3) at sample (k, 2) whose points S(sample) are `at` (k, 3), by the same forward
     differences as surface_speeds."""
-    h = _difference_step(uv)
+    h = difference_step(uv)
     return (surface.evaluate(sample + [h, 0]) - at) / h, (surface.evaluate(sample + [0, h]) - at) / h
 
 

@@ -100,10 +100,11 @@ def standing_error(surface: Surface, uv: np.ndarray, step: np.ndarray, floor: np
     q the surface's second form q(x) = ½ xᵀ H x in the tangent frame (a along the segment, c = n̂ × a; H from
     II(d) = L du² + 2M du dv + N dv², (du, dv) solving the first form for d); a segment s long gives s² times it.
     Both forms by central differences with steps (n, 2) (a secant curvature at that scale: a fold far smaller than
-    it is not seen), E and G at least floor² (2,) speeds (where a parametrisation's speed vanishes along a side the
-    ratio of the two forms is noise); 0 where the tangents are parallel (a pole)."""
+    it is not seen), E and G at least floor² speeds ((2,) or (n, 2); where a parametrisation's speed vanishes along
+    a side the ratio of the two forms is noise); 0 where the tangents are parallel (a pole)."""
     su, sv, normal, size, L, M, N = _forms(surface, uv, step)
-    E, F, G = (su * su).sum(1) + floor[0] ** 2, (su * sv).sum(1), (sv * sv).sum(1) + floor[1] ** 2
+    floor = np.broadcast_to(np.asarray(floor, float), uv.shape)
+    E, F, G = (su * su).sum(1) + floor[:, 0] ** 2, (su * sv).sum(1), (sv * sv).sum(1) + floor[:, 1] ** 2
     W = E * G - F * F
     ok = (W > 1e-12 * E * G) & (size > 0)
     W = np.where(ok, W, 1.0)
