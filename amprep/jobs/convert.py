@@ -72,12 +72,17 @@ class ConvertResult:
                 "unmeshed_faces": list(m.unmeshed_faces),
                 "estimated_triangles": m.estimated_triangles,
                 "brep_gap": m.brep_gap,
+                "seat_move": m.seat_move,
             }
         return out
 
 
 #: a B-rep gap above this × the tolerance is named in the notes, with whether the faces beside it kept the tolerance
 GAP_NOTE = 0.1
+
+#: an edge node's move to join its faces above the tolerance and this × the B-rep's gap is named in the notes: a gap g
+#: across the faces moves their nodes up to 2g (weld.SEAT_REACH), so a larger move is along the faces' surfaces
+MOVE_OVER_GAP = 4.0
 
 #: output checks of a mesh this large run beside manifold3d's in a forked child (forking costs ~10 ms)
 FORK_CHECKS_MIN = 100_000
@@ -113,6 +118,11 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
                          "error; " + ("the faces beside it were meshed finer to keep the tolerance" if meshing.within_tolerance else
                                       "no mesh closed on those nodes keeps the tolerance there: fix the CAD's gap or "
                                       "ask for a tolerance over twice it"))
+        if meshing.seat_move > max(meshing.tolerance, MOVE_OVER_GAP * meshing.brep_gap):
+            notes.append(f"the CAD's faces disagree on where their shared edges run by up to {meshing.seat_move:.3g} mm "
+                         "along their surfaces, more than the tolerance: each edge node was joined at one point where "
+                         "they meet, so an edge of the mesh may lie that far from where one of its faces puts it (the "
+                         "chordal error is measured after the join); the CAD's edges are not same-parameter there")
     else:
         mesh = read_stl(path)
         info.update(STL_INFO)

@@ -180,6 +180,7 @@ function report(r) {
       ['tolerance (mm)', g.tolerance], ['max chordal error (mm)', g.max_chordal_error],
       ['within tolerance', g.within_tolerance == null ? undefined : String(g.within_tolerance)],
       ['faces miss their shared edges by, at most (mm)', g.brep_gap || undefined],
+      ['edge nodes moved to join their faces, at most (mm)', g.seat_move || undefined],
       ['estimated triangles', g.estimated_triangles],
       ['faces unmeshed', g.unmeshed_faces?.length],
       ...Object.entries(g.faces_by_method || {}).map(([k, n]) => [`faces meshed by ${k}`, n])].filter((x) => x[1] !== undefined)));

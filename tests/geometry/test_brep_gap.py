@@ -61,6 +61,7 @@ def test_faces_that_meet_off_their_edge_are_joined_where_they_meet():
     model = model_from_shape(regrown(BRepPrimAPI_MakeCylinder(radius, 20.0).Shape(), delta, lambda c: True))
     r = mesh_model(model, MeshParams(tolerance=tol))
     assert check_mesh(r.mesh).closed and r.brep_gap < 1e-6
+    assert r.seat_move == pytest.approx(delta, rel=1e-3)  # the caps' nodes, moved out along their planes
     side = np.array([f.surface_type == "cylinder" for f in r.mesh.faces])[r.mesh.face_ids]
     w = np.array([[a / 6, b / 6, (6 - a - b) / 6] for a in range(7) for b in range(7 - a)])
     pts = np.einsum("pk,mkd->mpd", w, r.mesh.corners[side])
@@ -118,3 +119,20 @@ def test_a_face_with_no_curves_on_its_surface_is_reported_unmeshed_not_a_crash()
                                       TopLoc_Location(), 1e-7)
     r = mesh_model(model_from_shape(shape), MeshParams(tolerance=0.01))
     assert r.unmeshed_faces == (0,) and r.mesh.n_triangles > 0
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_faces_that_disagree_along_their_surfaces_are_named(tmp_path, mesher):
+    """A cylinder 30 µm wider than its caps' circles at 10 µm: no gap is left once joined (the caps' nodes go out along
+    their planes), so brep_gap says nothing; the summary's seat_move says how far the nodes went and a note names it.
+    The same solid unchanged moves nothing and has no such note."""
+    notes = {}
+    for delta in (0.0, 0.03):
+        path = tmp_path / f"wide_{delta}.brep"
+        BRepTools.Write_s(regrown(BRepPrimAPI_MakeCylinder(10.0, 20.0).Shape(), delta, lambda c: True), str(path))
+        result = convert(path, MeshParams(tolerance=0.01, mesher=mesher))
+        meshing = result.summary()["meshing"]
+        assert result.checks.closed and meshing["within_tolerance"] is True and meshing["brep_gap"] < 1e-6
+        assert meshing["seat_move"] == pytest.approx(delta, abs=1e-6)
+        notes[delta] = [n for n in result.notes if "disagree on where their shared edges run" in n]
+    assert not notes[0.0] and len(notes[0.03]) == 1 and "0.03 mm" in notes[0.03][0]

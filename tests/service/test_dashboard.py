@@ -222,6 +222,8 @@ def test_brep_gap_on_the_job_page(page, service: Service, tmp_path: Path) -> Non
     page.locator("#report h3", has_text="Meshing").wait_for()
     row = page.locator("#report tr", has=page.locator("th", has_text="faces miss their shared edges")).first
     assert float(row.locator("td").inner_text()) == pytest.approx(0.015, rel=0.2)
+    moved = page.locator("#report tr", has=page.locator("th", has_text="edge nodes moved to join their faces")).first
+    assert float(moved.locator("td").inner_text()) == pytest.approx(0.03, rel=0.2)  # the round's nodes, to the planes
     within = page.locator("#report tr", has=page.locator("th", has_text="within tolerance")).first
     assert within.locator("td").inner_text() == "false"
     assert any("miss their shared edges" in n for n in page.locator("#report li").all_inner_texts())

@@ -44,7 +44,9 @@ class MeshResult:
     `estimated_triangles` the count expected before meshing (estimate.py's from the B-rep; the quality mesher's
     from its edges and the faces' curvature, prepare.quality_estimate), `brep_gap` the largest distance of a shared
     edge or vertex point of the output from a face it bounds (mm; weld.seat_boundaries): what the B-rep's faces miss their
-    shared edges by, counted in face_error."""
+    shared edges by, counted in face_error; `seat_move` the farthest a face's boundary node was moved to join its
+    neighbours' (mm): where two faces' pcurves put their edge apart along their surfaces, the gap is nil and this is
+    how far apart."""
 
     mesh: Mesh
     tolerance: float
@@ -53,6 +55,7 @@ class MeshResult:
     unmeshed_faces: tuple[int, ...]
     estimated_triangles: int = 0
     brep_gap: float = 0.0
+    seat_move: float = 0.0
 
     @property
     def max_error(self) -> float:
@@ -105,7 +108,7 @@ def _placed(part: MeshResult, inst: Instancing, model: CadModel) -> MeshResult:
                 for t in (int(tf[f]),)}
     unmeshed = tuple(np.flatnonzero(np.isin(tf, list(part.unmeshed_faces))).tolist())
     return MeshResult(expand_mesh(inst, part.mesh, infos), part.tolerance, part.face_error[tf], fallback, unmeshed,
-                      part.estimated_triangles, part.brep_gap)
+                      part.estimated_triangles, part.brep_gap, part.seat_move)
 
 
 def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | None,
@@ -155,7 +158,8 @@ def _mesh_whole(prepared: Prepared, params: MeshParams, progress: ProgressFn | N
     face_error = np.array([np.nanmax(e) if len(e) and np.isfinite(e).any() else np.nan for e in faces.errors])
     prog("welding", 1.0)
     return MeshResult(mesh, tol, face_error, faces.fallback, tuple(sorted(set(faces.unmeshed))),
-                      faces.estimated or prepared.estimated, max(faces.gaps.face.values(), default=0.0))
+                      faces.estimated or prepared.estimated, max(faces.gaps.face.values(), default=0.0),
+                      faces.gaps.moved)
 
 
 def _stored(model: CadModel, surfaces: list[Surface | None]) -> list:  # type: ignore[type-arg]

@@ -49,10 +49,12 @@ def node_keys(patch: FacePatch, nodes: np.ndarray, vertex_roots: np.ndarray | No
 @dataclass
 class BrepGaps:
     """The B-rep's gap: a seated node's distance from a face it bounds, after projection; the largest seen in any round,
-    per face and per B-rep edge (mm)."""
+    per face and per B-rep edge (mm); and `moved`, the farthest a face's boundary node was moved to the point its
+    faces share (mm): where their pcurves disagree along the surfaces, the gap is nil and this is not."""
 
     face: dict[int, float] = field(default_factory=dict)
     edge: dict[int, float] = field(default_factory=dict)
+    moved: float = 0.0
 
     def record(self, face: int, edges: np.ndarray, gap: np.ndarray) -> None:
         """Keep the largest of the gaps (n,) of a face's nodes, for the face and for each node's edge (n,) (−1: a
@@ -69,7 +71,7 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
     iteration: where the faces meet, if they do near there), each such node's (u,v) its projection on its face (not
     at a pole: a patch with several nodes on one vertex keeps their (u,v)); else the first patch's node (the point
     the weld keeps, bit for bit). Returns {face: (k,) bool its nodes moved farther than SEAT_REL × tol}; each such
-    node's distance from its face after projection goes into `gaps`."""
+    node's distance from its face after projection goes into `gaps`, and how far it moved into gaps.moved."""
     moved_nodes: dict[int, np.ndarray] = {}
     idx = [i for i, p in enumerate(patches) if p is not None and len(p.nodes)]
     on = [np.flatnonzero((patches[i].node_vertex >= 0) | (patches[i].node_edge >= 0)) for i in idx]  # type: ignore[union-attr]
@@ -128,6 +130,8 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
         moved_nodes[i] = np.zeros(len(seated), bool)
         moved_nodes[i][b[moved]] = True
         gaps.record(i, p.node_edge[b[moved]], dist[here][moved])  # type: ignore[union-attr]
+        move = np.linalg.norm(target[here][moved] - nodes[here][moved], axis=1)
+        gaps.moved = max(gaps.moved, float(move.max(initial=0.0)))
     return moved_nodes
 
 
