@@ -296,15 +296,16 @@ def unfold(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6)
     return flip_for_angles(patch, surface, tolerance, order, angles=False)
 
 
-def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: np.ndarray, sides: np.ndarray,
+def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: np.ndarray, ring: tuple[np.ndarray, ...],
                        extent: np.ndarray) -> np.ndarray:
-    """(k, 2) the (u,v) of nodes idx (k,) moved SMOOTH_RELAX of the way to the mean of their neighbours in space (sides
-    (e, 2)), the move d (3,) taken into (u,v) by least squares on the tangent plane: J δ = d with J = [S_u S_v]
-    (uv_cdt.surface_tangents, steps from the (u,v) `extent` (m, 2)); a node where J is singular stays."""
-    n = len(uv)
-    count = np.bincount(sides.ravel(), minlength=n).astype(float)[idx]
-    total = np.stack([np.bincount(sides[:, 0], xyz[sides[:, 1], j], n) + np.bincount(sides[:, 1], xyz[sides[:, 0], j], n)
-                      for j in range(3)], axis=1)[idx]
+    """(k, 2) the (u,v) of nodes idx (k,) moved SMOOTH_RELAX of the way to the mean of their neighbours in space (ring:
+    _rings' (start (n+1,), neighbour) of each node), the move d (3,) taken into (u,v) by least squares on the tangent
+    plane: J δ = d with J = [S_u S_v] (uv_cdt.surface_tangents, steps from the (u,v) `extent` (m, 2)); a node where J
+    is singular stays."""
+    start, neighbour = ring
+    count = start[idx + 1] - start[idx]
+    owner, pick = np.repeat(np.arange(len(idx)), count), neighbour[_ranges(start[idx], start[idx + 1])]
+    total = np.stack([np.bincount(owner, xyz[pick, j], len(idx)) for j in range(3)], axis=1)
     su, sv = surface_tangents(surface, uv[idx], xyz[idx], extent)
     d = total / np.maximum(count, 1)[:, None] - xyz[idx]
     a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
@@ -313,6 +314,14 @@ def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: n
     ok = det > 1e-12 * np.maximum(a11 * a22, 1e-300)
     step = np.stack([a22 * b1 - a12 * b2, a11 * b2 - a12 * b1], 1) / np.where(ok, det, 1)[:, None]
     return uv[idx] + SMOOTH_RELAX * np.where(ok[:, None], step, 0.0)
+
+
+def _rings(sides: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(start (n+1,), neighbour): node i's neighbours along sides (e, 2) are neighbour[start[i]:start[i+1]]."""
+    a = np.concatenate([sides[:, 0], sides[:, 1]])
+    b = np.concatenate([sides[:, 1], sides[:, 0]])
+    order = np.argsort(a, kind="stable")
+    return np.searchsorted(a[order], np.arange(n + 1)), b[order]
 
 
 def _independent(candidates: np.ndarray, sides: np.ndarray, priority: np.ndarray) -> np.ndarray:
@@ -348,6 +357,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
         return patch
     n = len(uv)
     sides = edge_incidence(tris).edges
+    ring = _rings(sides, n)
     sign = np.sign(_signed_area2(uv, tris))
     angle = min_angles(xyz[tris])
     priority = (np.arange(n, dtype=np.uint64) * np.uint64(2654435761)) % np.uint64(2**32)  # a fixed scatter
@@ -363,7 +373,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
                 break
             candidates &= ~movers
             idx = np.flatnonzero(movers)
-            trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, sides, patch.uv)
+            trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, ring, patch.uv)
             trial_xyz[idx] = surface.evaluate(trial_uv[idx])
             star = np.unique(corner_order[_ranges(first[idx], first[idx + 1])] // 3)  # triangles holding a mover
             t = tris[star]
