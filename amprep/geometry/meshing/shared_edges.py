@@ -252,7 +252,8 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
     for _ in range(2):
         points = {ei: edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
                   if len(topo.edge_params[ei]) >= 2}
-        standing = [ei for ei in points if ei in bent and ei not in straight]
+        standing = [ei for ei in points if ei in bent and ei not in straight
+                    and not _stands_anyway(bent[ei], points[ei], target)]
         bends = dict(zip(standing, bend_sizes_many(
             [(cap[ei][1], topo.edge_params[ei], points[ei], bent[ei]) for ei in standing], target), strict=True))
         at_vertex: dict[int, float] = {}
@@ -279,6 +280,25 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
             parts = np.minimum(parts, MAX_PARTS).astype(np.int64)
             if (parts > 1).any() and ei not in frozen:
                 topo.edge_params[ei] = split_segments(topo.edge_params[ei], parts)
+
+
+def _stands_anyway(faces: list[tuple[TopoDS_Face, Surface]], points: np.ndarray, target: float) -> bool:
+    """True when no segment of an edge (its points (n, 3)) can be cut by bend_sizes: every face it bounds is a cylinder,
+    sphere or torus whose largest curvature κ keeps κ L² / 8 ≤ the target on its longest segment L (a triangle of
+    APEX < ½ standing on a segment lies in the circle on it as diameter, where a quadratic of curvatures ≤ κ departs
+    from its interpolation by at most κ (L/2)² / 2): a cylinder's circles, so their second forms need no sampling."""
+    longest = float(np.max(np.sum(np.diff(points, axis=0) ** 2, axis=1), initial=0.0))
+    for _, surface in faces:
+        kind, prm = surface.closed_form if surface.closed_form is not None else (None, None)
+        if kind == 1 or kind == 3:
+            radius = abs(float(prm[12]))  # type: ignore[index]
+        elif kind == 4:
+            radius = min(abs(float(prm[13])), abs(float(prm[12])) - abs(float(prm[13])))  # type: ignore[index]
+        else:
+            return False
+        if not (radius > 0 and longest / (8 * radius) <= target):
+            return False
+    return True
 
 
 def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_Face, Surface]],
