@@ -117,3 +117,27 @@ def test_refining_in_the_space_the_mesh_was_made_in_converges(ctc02_face35):
     assert len(done.tris) < 3 * len(tris)
     metric = refine_patch(patch, err, surface, tol, 6)  # the same, re-triangulating in metric-scaled (u,v)
     assert metric is None or len(metric.tris) > 1.5 * len(done.tris)  # measured: 55k triangles against 18k
+
+
+@pytest.mark.parametrize(("major", "minor", "span", "before", "floor"),
+                         [(92.5, 1.0, 0.88, 3.27, 9.0), (17.0, 0.5, 2 * np.pi, 1.55, 5.0)])
+def test_cells_cut_differently_meet_without_needles(major, minor, span, before, floor):
+    """The inner half of a thin torus (OCCT's top.brep has such fillets), off the lattice at 0.1 mm (its tube's edges
+    are sized by their angle): the cells either side of its middle were cut into 64 and 56 along it, and their corners
+    there interleaved, pairs 0.18 mm apart in cells of 1.3 mm, the smallest angle `before`°. Corners nearer than half a
+    cell to an earlier one are dropped (uv_seed.SEED_APART): above `floor`°, within the tolerance by OCCT's distance."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.gp import gp_Ax3, gp_Dir, gp_Pnt, gp_Torus
+
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.measure.regularity import min_angles
+    from amprep.geometry.meshing.pipeline import mesh_model
+    from tests.geometry.test_independent_distance import _worst_distance
+
+    axis = gp_Ax3(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1))
+    face = BRepBuilderAPI_MakeFace(gp_Torus(axis, major, minor), 0.0, span, np.pi / 2, np.pi).Face()
+    model = model_from_shape(face)
+    r = mesh_model(model, MeshParams(tolerance=0.1, mesher="quality"))
+    assert r.mesh.faces[0].meshed_by == "quality"
+    assert np.degrees(min_angles(r.mesh.vertices[r.mesh.triangles])).min() >= floor > before
+    assert r.max_error <= 0.1 and _worst_distance(model, r.mesh, samples=60) <= 0.1 * 1.001

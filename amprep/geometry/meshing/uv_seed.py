@@ -34,6 +34,11 @@ MAX_ASPECT = 2.0
 QUALITY_ASPECT = 2.0
 #: corners nearer the boundary than this × the cell's shorter side are dropped (no slivers along the boundary)
 KEEP_OFF = 0.25
+#: the quality mesher's corners nearer each other than this × the smaller of their cells' shorter sides are one (cells
+#: cut differently meet along a side: their corners there interleave, and a near pair makes needles)
+SEED_APART = 0.5
+#: the nearest corners looked at for that (two grids meeting along a line put at most a few within half a cell)
+SEED_NEIGHBOURS = 6
 #: the boundary is sampled in at most this many points to find how near it the corners lie
 MAX_BOUNDARY_SAMPLES = 200_000
 #: a face with no single scale (curvature_seeds' `local`): the surface's speeds are taken as at least this × their
@@ -254,13 +259,31 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
     lo, span = b_uv.min(axis=0), np.maximum(np.ptp(b_uv, axis=0), 1e-12)
     key = np.round((corners - lo) / span * 2**30).astype(np.int64)  # cells share corners: one point each
     _, first = np.unique(key[:, 0] * (2**31 + 1) + key[:, 1], return_index=True)
-    corners, shorter = corners[first], shorter[first]
+    corners, shorter, cell = corners[first], shorter[first], np.repeat(sizes, 4, axis=0)[first]
     if local:  # how near the boundary a corner is: in space, as no one scale of (u,v) tells
-        keep = _off_boundary(surface.evaluate(corners), shorter, [surface.evaluate(lp) for lp in _dense(loops)],
-                             by_segment=True, pieces=LOOP_PARTS)
+        at = surface.evaluate(corners)
+        keep = _off_boundary(at, shorter, [surface.evaluate(lp) for lp in _dense(loops)], by_segment=True,
+                             pieces=LOOP_PARTS)
     else:
-        keep = _off_boundary(corners * scale, shorter, [lp * scale for lp in loops])
+        at = corners * scale
+        keep = _off_boundary(at, shorter, [lp * scale for lp in loops])
+    if true_metric:  # judged by the lengths at the corner itself: toward a pole or apex a cell narrows to a point
+        near = np.maximum(cell * _local_speeds(surface, corners, b_uv), target).min(axis=1) if local else shorter
+        keep &= _apart_from_earlier(at, near)
     return corners[keep], scale
+
+
+def _apart_from_earlier(points: np.ndarray, shorter: np.ndarray) -> np.ndarray:
+    """(n,) bool: False for a point (n, d) nearer than SEED_APART × the smaller of the two shorter (n,) to an earlier one
+    among its SEED_NEIGHBOURS nearest."""
+    k = min(SEED_NEIGHBOURS + 1, len(points))
+    if k < 2:
+        return np.ones(len(points), bool)
+    distance, nearest = cKDTree(points).query(points, k=k)
+    nearest = np.minimum(nearest, len(points) - 1)  # a missing neighbour (k over n) comes as n, at inf distance
+    own = np.arange(len(points))[:, None]
+    close = (distance < SEED_APART * np.minimum(shorter[:, None], shorter[nearest])) & (nearest < own)
+    return ~close.any(axis=1)
 
 
 def _through_points(length: np.ndarray) -> np.ndarray:
