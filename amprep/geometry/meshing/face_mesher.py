@@ -41,6 +41,9 @@ from amprep.geometry.meshing.uv_cdt import (
 from amprep.geometry.meshing.uv_seed import clear_poles, curvature_seeds
 from amprep.geometry.meshing.weld import pole_folds
 
+#: two nodes of one B-rep vertex within this × the shorter boundary segment at either are one node (a pinch)
+PINCH_REACH = 0.05
+
 
 def pole_runs(loops: list[dict]) -> list[np.ndarray]:  # type: ignore[type-arg]
     """Each pole or apex of the loops (boundary_loops'): the (u,v) of its run of nodes on one B-rep vertex (a degenerate
@@ -227,8 +230,9 @@ def _boundary_nodes(loops: list[dict], length_scale: np.ndarray,  # type: ignore
     """(uv (nb, 2), vertex, edge, param each (nb,), segments (s, 2) into them): the closed loops' nodes and segments,
     with a face's pinch made one node: the nodes of one B-rep vertex met twice (two loops that touch there, or one
     loop through it twice), outside a pole's run, whose (u,v) · length_scale (2,) lie within MIN_SPACING × tolerance
-    (the copies of a seam vertex lie a period apart). Triangle needs them one point: their pcurves' ends differ by
-    rounding, and two segments from points 1e-16 apart cross."""
+    or PINCH_REACH × the shorter segment at either (the copies of a seam vertex lie a period apart). Triangle needs
+    them one point: their pcurves' ends differ by rounding (1e-16 mm), or by a reader's fit (a STEP: 1.1e-4 mm), and
+    two segments from points that near cross."""
     uv = np.concatenate([lp["uv"] for lp in loops])
     vertex = np.concatenate([lp["vertex"] for lp in loops])
     seg, start, run = [], 0, []
@@ -239,11 +243,15 @@ def _boundary_nodes(loops: list[dict], length_scale: np.ndarray,  # type: ignore
         run.append((v >= 0) & ((v == np.roll(v, 1)) | (v == np.roll(v, -1))))
         start += len(idx)
     segments, first = np.concatenate(seg), np.arange(len(uv))
+    side = np.linalg.norm((uv[segments[:, 1]] - uv[segments[:, 0]]) * length_scale, axis=1)
+    shortest = np.full(len(uv), np.inf)
+    np.minimum.at(shortest, segments.ravel(), np.repeat(side, 2))  # the shorter segment at each node
     candidates = np.flatnonzero((vertex >= 0) & ~np.concatenate(run))
     for v in np.unique(vertex[candidates]).tolist():
         nodes = candidates[vertex[candidates] == v]
         for k in range(1, len(nodes)):
-            near = np.linalg.norm((uv[nodes[:k]] - uv[nodes[k]]) * length_scale, axis=1) <= MIN_SPACING * tolerance
+            reach = np.maximum(MIN_SPACING * tolerance, PINCH_REACH * np.minimum(shortest[nodes[:k]], shortest[nodes[k]]))
+            near = np.linalg.norm((uv[nodes[:k]] - uv[nodes[k]]) * length_scale, axis=1) <= reach
             if near.any():
                 first[nodes[k]] = first[nodes[:k][near][0]]
     keep = first == np.arange(len(uv))
