@@ -27,7 +27,8 @@ SNAP = 1e-6
 #: the polish stops at a round that moves no corner by more than this × the diagonal (later rounds on CTC-02's
 #: B-spline twin moved them by 1e-10 mm, each at 7 s)
 SETTLED = 1e-9
-#: corners farther from their face than this × the 90th percentile of the distances are left out of a round
+#: corners farther from their face than this × the 90th percentile of that face's corners' distances are left out of
+#: a round
 TRIM = 3.0
 #: a part with this many free-form faces is placed with the compiled evaluator, whatever the STL's size
 FREE_FORM_FACES = 60
@@ -127,7 +128,10 @@ def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], fa
         src = placed.corners[tris].reshape(-1, 3)
         _, area = cusp.unit_normals(placed.corners[tris])
         off = dist[tris].ravel()  # corners far off their face (a triangle given a neighbour's face) do not pull the fit
-        near = off <= max(TRIM * float(np.quantile(off, 0.9)), 1e-6 * diag)
+        # judged against the corners of the same face: a face the coarse fit left off as a whole (a bar's end, the
+        # only face that holds it along its axis) is the fit's error, not an outlier
+        typical = np.concatenate([np.full(3 * len(g), float(np.quantile(dist[g], 0.9))) for g in groups])
+        near = off <= np.maximum(TRIM * typical, 1e-6 * diag)
         if near.sum() < 3:
             break
         dR, dt = point_to_plane(src[near], tgt[near], normals[near],  # weighted by area, like the surface
