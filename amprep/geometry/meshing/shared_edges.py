@@ -153,7 +153,6 @@ BEND_SLACK = 0.1
 STENCIL = 2.0
 #: the surface's typical speeds (bend_sizes' floor of the first form) are the median over this many² points
 SPEED_GRID = 5
-_UNIT = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
 #: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
 UV_STRAIGHT = 1e-6
 
@@ -317,7 +316,7 @@ def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[
     """bend_sizes of each (edge, params (n,), its points there (n, 3), its faces), the points of all the edges on one
     face evaluated on its surface together; each (edge, face) pair keeps its own difference steps and floor."""
     out = [np.zeros(3 * (len(params) - 1)) for _, params, _, _ in edges]
-    by_face: dict[int, tuple[TopoDS_Face, Surface, list]] = {}  # type: ignore[type-arg]
+    by_face: dict[int, tuple[Surface, list]] = {}  # type: ignore[type-arg]
     for k, (edge, params, points, faces) in enumerate(edges):
         t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()
         chord = np.repeat(np.diff(points, axis=0), 3, axis=0)
@@ -325,15 +324,14 @@ def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[
             pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
             if pcurve is not None:
                 uv = np.array([pcurve.Value(float(x)).Coord() for x in t]).reshape(-1, 2)
-                by_face.setdefault(id(surface), (face, surface, []))[2].append((k, uv, chord))
-    for _, surface, pairs in by_face.values():
+                by_face.setdefault(id(surface), (surface, []))[1].append((k, uv, chord))
+    for surface, pairs in by_face.values():
         median = _median_speeds(surface, pairs[0][1]) if surface.bounds is not None else None
         uv = np.concatenate([uv for _, uv, _ in pairs])
         floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(
             median if median is not None else _median_speeds(surface, q), q.shape) for _, q, _ in pairs])
-        h = np.concatenate([np.full(len(q), difference_step(q)) for _, q, _ in pairs])[:, None]
-        p = surface.evaluate(uv)
-        speeds = np.stack([np.linalg.norm(surface.evaluate(uv + h * d) - p, axis=1) / h[:, 0] for d in _UNIT], axis=1)
+        h = np.concatenate([np.full(len(q), difference_step(q)) for _, q, _ in pairs])  # each pair's own step
+        speeds = np.stack(surface_speeds(surface, uv, uv, step=h), axis=1)
         step = np.minimum(STENCIL * target / np.maximum(np.maximum(speeds, floor), 1e-300), uv_extent(surface) / 8)
         if surface.bounds is not None:  # the stencil inside the face: past its bounds a surface may be clamped
             u1, u2, v1, v2 = surface.bounds

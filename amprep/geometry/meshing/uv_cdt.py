@@ -21,12 +21,14 @@ def difference_step(uv: np.ndarray) -> float:
     return 1e-6 * max(float(np.ptp(uv[:, 0])), float(np.ptp(uv[:, 1])), 1e-9)
 
 
-def surface_speeds(surface: Surface, sample: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(|∂S/∂u|, |∂S/∂v|) each (k,) at sample (k, 2), by forward differences of 1e-6 × the extent of uv (n, 2)."""
-    h = difference_step(uv)
+def surface_speeds(surface: Surface, sample: np.ndarray, uv: np.ndarray,
+                   step: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(|∂S/∂u|, |∂S/∂v|) each (k,) at sample (k, 2), by forward differences of 1e-6 × the extent of uv (n, 2), or of
+    `step` (k,), one per sample."""
+    h = np.asarray(difference_step(uv) if step is None else step, float)
     p = surface.evaluate(sample)
-    du = np.linalg.norm(surface.evaluate(sample + [h, 0]) - p, axis=1) / h
-    dv = np.linalg.norm(surface.evaluate(sample + [0, h]) - p, axis=1) / h
+    du = np.linalg.norm(surface.evaluate(sample + h[..., None] * [1.0, 0.0]) - p, axis=1) / h
+    dv = np.linalg.norm(surface.evaluate(sample + h[..., None] * [0.0, 1.0]) - p, axis=1) / h
     return du, dv
 
 
