@@ -179,3 +179,22 @@ def test_one_closed_trimmed_surface_is_sewn_to_itself(tmp_path, mesher):
     r = mesh_model(model, MeshParams(tolerance=0.1, mesher=mesher))
     checks = check_mesh(r.mesh)
     assert checks.boundary_edges == checks.nonmanifold_edges == checks.misoriented_edges == 0 and r.within_tolerance
+
+
+def test_straight_edges_keep_only_the_points_the_grading_cuts():
+    """BRepMesh leaves a point a third along every line; the quality mesher drops it where every face of the edge
+    keeps lines straight in (u,v), and cuts the line by its own rules alone: a 10 mm cube is 12 triangles on its 8
+    corners; a 40 × 4 × 4 bar's long edges are cut into four equal steps (GRADE × the 40 × 4 faces' width 2A/P =
+    320/88 mm: 10.9 mm, so ⌈40 / 10.9⌉ = 4), then the end ones halved (GROWTH: a step may be its midpoint's distance
+    from the end, 5 mm, plus the 4 mm edges there), none at that third."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    cube = mesh_model(model_from_shape(BRepPrimAPI_MakeBox(10, 10, 10).Shape()),
+                      MeshParams(tolerance=0.34, mesher="quality")).mesh
+    assert (len(cube.vertices), cube.n_triangles) == (8, 12)
+    assert check_mesh(cube).closed and abs(check_mesh(cube).volume - 1000) < 1e-6
+    bar = mesh_model(model_from_shape(BRepPrimAPI_MakeBox(40, 4, 4).Shape()),
+                     MeshParams(tolerance=0.34, mesher="quality")).mesh
+    on_edge = bar.vertices[(np.abs(bar.vertices[:, 1]) < 1e-9) & (np.abs(bar.vertices[:, 2]) < 1e-9)]
+    assert np.allclose(np.sort(on_edge[:, 0]), [0, 5, 10, 20, 30, 35, 40])
+    assert check_mesh(bar).closed and manifold3d_accepts(bar)

@@ -29,7 +29,9 @@ from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.prepare import quality_estimate, refuse_quality_too_large
 from amprep.geometry.meshing.shared_edges import (
     ANALYTIC,
+    LINES_STAY_LINES,
     ROOM,
+    bare_straight_edges,
     collapse_short_edges,
     discretize_missing_edges,
     edge_length,
@@ -255,6 +257,7 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
     old points) keeps its points: a face of `remesh` on such an edge is not a lattice then (its rows may need them)."""
     before = dict(f.topo.edge_params)
     faces = [f.model.faces[i] for i in remesh]
+    bare_straight_edges(faces, f.topo, lambda ei: _lines_stay_lines(f, ei))
     collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
     grade_edges(faces, [f.surfaces[i] for i in remesh], f.topo, f.tol, target)  # type: ignore[misc]
     loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
@@ -272,6 +275,12 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
             f.lattice.pop(i, None)
     f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
     return loops, planned
+
+
+def _lines_stay_lines(f: FaceStates, edge_index: int) -> bool:
+    """True when every face the edge bounds (in `remesh` or not) keeps lines straight in its (u,v)."""
+    return all(f.surfaces[i] is not None and f.surfaces[i].surface_type in LINES_STAY_LINES  # type: ignore[union-attr]
+               for i in _faces_of_edge(f.model, f.topo, edge_index))
 
 
 def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None],  # type: ignore[type-arg]

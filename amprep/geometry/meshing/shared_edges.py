@@ -4,16 +4,19 @@ faces with a pole (a degenerated edge)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepGProp import BRepGProp
 from OCP.GCPnts import GCPnts_TangentialDeflection
 from OCP.GProp import GProp_GProps
-from OCP.TopoDS import TopoDS_Edge, TopoDS_Face
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_WIRE
+from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
 from amprep.geometry.cad.surfaces import Surface, uv_extent
-from amprep.geometry.cad.topology import Topology, face_edges
+from amprep.geometry.cad.topology import Topology, explore, face_edges
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING, difference_step, surface_speeds
 from amprep.geometry.meshing.uv_seed import LOCAL_FLOOR, standing_error
@@ -190,6 +193,31 @@ def _curved_in_uv(edge, face: TopoDS_Face, params: np.ndarray) -> bool:  # type:
         return True
     off = (uv[:, 0] - uv[0, 0]) * chord[1] - (uv[:, 1] - uv[0, 1]) * chord[0]
     return bool(np.abs(off).max() > UV_STRAIGHT * length * length)
+
+
+#: surface types on which a straight edge's pcurve is a straight line too
+LINES_STAY_LINES = ("plane", "cylinder", "cone")
+
+
+def bare_straight_edges(faces: list[TopoDS_Face], topo: Topology, allowed: Callable[[int], bool]) -> None:
+    """Drop the interior points of each straight edge of `faces` (in topo.edge_params) whose index is `allowed`:
+    BRepMesh leaves one at a third of every line, which the quality mesher's grading (grade_edges: the faces' widths,
+    the segments at the ends, the standing rule) would only add to. The caller allows edges whose faces all keep
+    lines straight in (u,v) (LINES_STAY_LINES), so the two ends alone are its pcurves. A wire left with under three
+    segments (a face of no width: two edges out and back along a line) keeps its edges' points."""
+    bared: dict[int, np.ndarray] = {}
+    for face in faces:
+        for edge in face_edges(face):
+            ei = topo.edge_index(edge)
+            params = topo.edge_params.get(ei)
+            if (ei not in bared and params is not None and len(params) > 2 and not BRep_Tool.Degenerated_s(edge)
+                    and allowed(ei) and _straight(edge, params)):
+                bared[ei] = params
+                topo.edge_params[ei] = params[[0, -1]]
+    for wire in (w for face in faces for w in explore(face, TopAbs_WIRE, TopoDS.Wire_s)) if bared else ():
+        own = [topo.edge_index(e) for e in explore(wire, TopAbs_EDGE, TopoDS.Edge_s) if not BRep_Tool.Degenerated_s(e)]
+        if sum(len(topo.edge_params.get(ei, ())) - 1 for ei in own) < 3:
+            topo.edge_params.update((ei, bared[ei]) for ei in own if ei in bared)
 
 
 def face_width(face: TopoDS_Face, topo: Topology) -> float:

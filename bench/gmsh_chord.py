@@ -1,0 +1,104 @@
+"""gmsh (Frontal-Delaunay) sized to a chord tolerance, as a peer for the regularity tables: an equally regular mesher.
+
+gmsh has no chord tolerance. Its size here comes from a callback: on a face √(8 · 0.95 ε / κ) with κ the larger
+principal curvature there (the sagitta of a chord of that length on a circle of radius 1/κ is 0.95 ε, the quality
+mesher's own lattice SAFETY); on an edge the least of that over the faces it bounds and of its own curvature's
+size; no limit where nothing is curved (sizes then grow from the boundary, gmsh's default). The same isotropic
+rule the quality mesher's (u,v) cells follow, so its counts compare with ours; its chordal error is then measured
+with amprep's own measure in each triangle's (u,v) on the B-rep face gmsh meshed (gmsh's surface tags are the
+faces in the order amprep reads them; a face whose (u,v) does not give back gmsh's points is left unmeasured).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from amprep.geometry.cad.read import CadModel
+from amprep.geometry.cad.surfaces import surface_of
+from amprep.geometry.core.mesh import FaceInfo, Mesh
+from amprep.geometry.measure.chordal import triangle_chordal_error
+from amprep.geometry.placement.project import unwrap_corners
+
+SAFETY = 0.95  # as lattice.SAFETY
+
+
+def _size_callback(gmsh, tol: float):  # type: ignore[no-untyped-def]
+    """gmsh's size callback (dim, tag, x, y, z, lc) → size for the chord tolerance `tol` (mm)."""
+    up = {c: list(gmsh.model.getAdjacencies(1, c)[0]) for _, c in gmsh.model.getEntities(1)}
+
+    def kmax(s: int, xyz: list[float]) -> float:
+        uv = gmsh.model.getParametrization(2, s, xyz)
+        k1, k2, _, _ = gmsh.model.getPrincipalCurvatures(s, uv)
+        return max(abs(k1[0]), abs(k2[0]))
+
+    def size(dim: int, tag: int, x: float, y: float, z: float, lc: float) -> float:
+        xyz = [x, y, z]
+        try:
+            if dim == 2:
+                k = kmax(tag, xyz)
+            elif dim == 1:
+                t = gmsh.model.getParametrization(1, tag, xyz)
+                k = max([kmax(s, xyz) for s in up.get(tag, [])] + [abs(gmsh.model.getCurvature(1, tag, t)[0])])
+            else:
+                return lc
+        except Exception:  # a point gmsh cannot parametrise: its own size
+            return lc
+        return min(lc, math.sqrt(8 * SAFETY * tol / k)) if 1e-12 < k < math.inf else lc
+
+    return size
+
+
+def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ...]) -> dict:  # type: ignore[type-arg]
+    """{'mesh': Mesh (face ids as amprep's), 'seconds' (import and meshing, the Python size callback included),
+    'max_error' (mm, over the measured faces), 'over' (triangles over `tol`), 'unmeasured' (faces)}."""
+    import gmsh
+
+    t0 = time.perf_counter()
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        if path.suffix.lower() in (".stp", ".step"):
+            gmsh.option.setString("Geometry.OCCTargetUnit", "MM")
+        gmsh.model.occ.importShapes(str(path))
+        gmsh.model.occ.synchronize()
+        gmsh.model.mesh.setSizeCallback(_size_callback(gmsh, tol))
+        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+        gmsh.model.mesh.generate(2)
+        seconds = time.perf_counter() - t0
+        tags, coord, _ = gmsh.model.mesh.getNodes()
+        coord = np.asarray(coord).reshape(-1, 3)
+        where = np.zeros(int(np.max(tags)) + 1, np.int64)
+        where[np.asarray(tags, np.int64)] = np.arange(len(tags))
+        tris, ids, uvs = [], [], []
+        for _, s in gmsh.model.getEntities(2):
+            types, _, nodes = gmsh.model.mesh.getElements(2, s)
+            if 2 not in list(types):
+                continue
+            t = where[np.asarray(nodes[list(types).index(2)], np.int64).reshape(-1, 3)]
+            tris.append(t)
+            ids.append(np.full(len(t), s - 1, np.int32))
+            uvs.append(np.asarray(gmsh.model.getParametrization(2, s, coord[t].ravel())).reshape(-1, 3, 2))
+    finally:
+        gmsh.finalize()
+    tri, face_ids, uv = np.concatenate(tris), np.concatenate(ids), np.concatenate(uvs)
+    max_error, over, unmeasured = 0.0, 0, 0
+    scale = float(np.ptp(coord, axis=0).max())
+    for f in np.unique(face_ids):
+        sel = face_ids == f
+        surface = surface_of(model.faces[f]) if f < len(model.faces) else None
+        corners = coord[tri[sel]]
+        if surface is None:
+            unmeasured += 1
+            continue
+        fuv = unwrap_corners(uv[sel], surface.periods)
+        if np.abs(surface.evaluate(fuv.reshape(-1, 2)) - corners.reshape(-1, 3)).max() > 1e-6 * scale + 1e-6:
+            unmeasured += 1
+            continue
+        e = triangle_chordal_error(corners, fuv, surface, affine=surface.affine)
+        max_error, over = max(max_error, float(e.max())), over + int((e > tol).sum())
+    mesh = Mesh(coord, tri, face_ids, faces=faces)
+    return {"mesh": mesh, "seconds": seconds, "max_error": max_error, "over": over, "unmeasured": unmeasured}
