@@ -206,6 +206,10 @@ def nearest_copy(uv: np.ndarray, guess: np.ndarray, periods: tuple[float | None,
     return out
 
 
+#: Surface.closed_form's kinds (the compiled kernels' and the lattice's codes)
+PLANE, CYLINDER, CONE, SPHERE, TORUS = 0, 1, 2, 3, 4
+
+
 def _closed_form(kind: int, frame: tuple[np.ndarray, ...], a: float = 0.0, b: float = 0.0) -> tuple[int, np.ndarray]:
     """(kind, (14,) O X Y Z a b): the compiled kernel's description of a closed-form surface (_chordal_kernel.py)."""
     return kind, np.concatenate([*frame, [a, b]]).astype(np.float64)
@@ -233,26 +237,26 @@ def _surface(ad: BRepAdaptor_Surface) -> Surface:
     name = SURFACE_TYPES.get(kind, "other")
     if kind == GeomAbs_Plane:
         o, x, y, z = _frame(ad.Plane().Position())
-        return Surface(name, plane(o, x, y), closed_form=_closed_form(0, (o, x, y, z)))
+        return Surface(name, plane(o, x, y), closed_form=_closed_form(PLANE, (o, x, y, z)))
     if kind == GeomAbs_Cylinder:
         c = ad.Cylinder()
         o, x, y, z = _frame(c.Position())
         return Surface(name, cylinder(o, x, y, z, c.Radius()), data=dict(radius=c.Radius(), origin=o, axis=z),
-                       closed_form=_closed_form(1, (o, x, y, z), c.Radius()))
+                       closed_form=_closed_form(CYLINDER, (o, x, y, z), c.Radius()))
     if kind == GeomAbs_Cone:
         c = ad.Cone()
         fr = _frame(c.Position())
         return Surface(name, cone(*fr, c.RefRadius(), c.SemiAngle()),
-                       closed_form=_closed_form(2, fr, c.RefRadius(), c.SemiAngle()))
+                       closed_form=_closed_form(CONE, fr, c.RefRadius(), c.SemiAngle()))
     if kind == GeomAbs_Sphere:
         s = ad.Sphere()
         fr = _frame(s.Position())
-        return Surface(name, sphere(*fr, s.Radius()), closed_form=_closed_form(3, fr, s.Radius()))
+        return Surface(name, sphere(*fr, s.Radius()), closed_form=_closed_form(SPHERE, fr, s.Radius()))
     if kind == GeomAbs_Torus:
         t = ad.Torus()
         fr = _frame(t.Position())
         return Surface(name, torus(*fr, t.MajorRadius(), t.MinorRadius()),
-                       closed_form=_closed_form(4, fr, t.MajorRadius(), t.MinorRadius()))
+                       closed_form=_closed_form(TORUS, fr, t.MajorRadius(), t.MinorRadius()))
     if kind in (GeomAbs_BSplineSurface, GeomAbs_BezierSurface):
         geom = ad.BSpline() if kind == GeomAbs_BSplineSurface else GeomConvert.SurfaceToBSplineSurface_s(ad.Bezier())
         d = bspline_data(geom)

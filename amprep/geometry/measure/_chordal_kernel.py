@@ -5,8 +5,7 @@ import numpy as np
 from numba import njit, prange
 
 from amprep.geometry.cad._bspline_kernel import point_kernel, scratch
-
-PLANE, CYLINDER, CONE, SPHERE, TORUS = 0, 1, 2, 3, 4
+from amprep.geometry.cad.surfaces import CONE, CYLINDER, PLANE, SPHERE
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -13,7 +13,7 @@ from OCP.BRep import BRep_Tool
 from OCP.TopoDS import TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.surfaces import CONE, CYLINDER, SPHERE, TORUS, Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.meshing.local_refine import refine_patch
@@ -23,7 +23,7 @@ from amprep.geometry.meshing.uv_cdt import surface_speeds
 from amprep.geometry.meshing.uv_seed import DIFF_STEP, polygon_area, second_form
 
 #: closed_form kinds (cad/surfaces.py) the lattice meshes: cylinder, cone, sphere, torus
-KINDS = (1, 2, 3, 4)
+KINDS = (CYLINDER, CONE, SPHERE, TORUS)
 #: the share of the tolerance the lattice's own bound (|κu|·b² + |κv|·h²)/8 aims at, for what this second-order bound
 #: leaves out (the curvature's change across a triangle): the measured worst is 0.93 of the tolerance on the sphere
 #: and torus at 0.001 mm, and a triangle over it is refined like any other
@@ -119,12 +119,12 @@ def _metric(surface: Surface, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     kind, d = surface.closed_form  # type: ignore[misc]
     a, b = float(d[12]), float(d[13])
     one = np.ones_like(v)
-    if kind == 1:  # cylinder, radius a
+    if kind == CYLINDER:  # radius a
         return a * one, one, one / a, 0 * one
-    if kind == 2:  # cone, reference radius a, semi-angle b
+    if kind == CONE:  # reference radius a, semi-angle b
         rho = np.abs(a + v * np.sin(b))
         return rho, one, np.abs(np.cos(b)) / np.maximum(rho, 1e-300), 0 * one
-    if kind == 3:  # sphere, radius a
+    if kind == SPHERE:  # radius a
         return np.abs(a * np.cos(v)), a * one, one / a, one / a
     rho = a + b * np.cos(v)  # torus, major a, minor b
     return rho, b * one, np.abs(np.cos(v)) / np.maximum(np.abs(rho), 1e-300), one / b

@@ -15,7 +15,7 @@ from OCP.GProp import GProp_GProps
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
-from amprep.geometry.cad.surfaces import Surface, uv_extent
+from amprep.geometry.cad.surfaces import CYLINDER, SPHERE, TORUS, Surface, uv_extent
 from amprep.geometry.cad.topology import Topology, explore, face_edges
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING, difference_step, surface_speeds
@@ -317,9 +317,9 @@ def _stands_anyway(faces: list[tuple[TopoDS_Face, Surface]], points: np.ndarray,
     longest = float(np.max(np.sum(np.diff(points, axis=0) ** 2, axis=1), initial=0.0))
     for _, surface in faces:
         kind, prm = surface.closed_form if surface.closed_form is not None else (None, None)
-        if kind == 1 or kind == 3:
+        if kind in (CYLINDER, SPHERE):
             radius = abs(float(prm[12]))  # type: ignore[index]
-        elif kind == 4:
+        elif kind == TORUS:
             radius = min(abs(float(prm[13])), abs(float(prm[12])) - abs(float(prm[13])))  # type: ignore[index]
         else:
             return False
