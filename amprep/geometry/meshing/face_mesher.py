@@ -247,8 +247,10 @@ def _boundary_nodes(loops: list[dict], length_scale: np.ndarray,  # type: ignore
     shortest = np.full(len(uv), np.inf)
     np.minimum.at(shortest, segments.ravel(), np.repeat(side, 2))  # the shorter segment at each node
     candidates = np.flatnonzero((vertex >= 0) & ~np.concatenate(run))
-    for v in np.unique(vertex[candidates]).tolist():
-        nodes = candidates[vertex[candidates] == v]
+    by_vertex = candidates[np.argsort(vertex[candidates], kind="stable")]  # each vertex's nodes in loop order
+    _, at, count = np.unique(vertex[by_vertex], return_index=True, return_counts=True)
+    for a, c in zip(at[count > 1].tolist(), count[count > 1].tolist()):  # only a vertex met twice can pinch
+        nodes = by_vertex[a:a + c]
         for k in range(1, len(nodes)):
             reach = np.maximum(MIN_SPACING * tolerance, PINCH_REACH * np.minimum(shortest[nodes[:k]], shortest[nodes[k]]))
             near = np.linalg.norm((uv[nodes[:k]] - uv[nodes[k]]) * length_scale, axis=1) <= reach
