@@ -257,8 +257,8 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
     old points) keeps its points: a face of `remesh` on such an edge is not a lattice then (its rows may need them)."""
     before = dict(f.topo.edge_params)
     faces = [f.model.faces[i] for i in remesh]
-    bare_straight_edges(faces, f.topo, lambda ei: _lines_stay_lines(f, ei))
     collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
+    bare_straight_edges(faces, f.topo, lambda ei: _lines_stay_lines(f, ei))
     grade_edges(faces, [f.surfaces[i] for i in remesh], f.topo, f.tol, target)  # type: ignore[misc]
     loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
     planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]

@@ -204,7 +204,8 @@ def bare_straight_edges(faces: list[TopoDS_Face], topo: Topology, allowed: Calla
     BRepMesh leaves one at a third of every line, which the quality mesher's grading (grade_edges: the faces' widths,
     the segments at the ends, the standing rule) would only add to. The caller allows edges whose faces all keep
     lines straight in (u,v) (LINES_STAY_LINES), so the two ends alone are its pcurves. A wire left with under three
-    segments (a face of no width: two edges out and back along a line) keeps its edges' points."""
+    segments (a face of no width: two edges out and back along a line, or two lines whose short ends
+    collapse_short_edges made points; run after it) keeps its edges' points."""
     bared: dict[int, np.ndarray] = {}
     for face in faces:
         for edge in face_edges(face):
@@ -215,9 +216,11 @@ def bare_straight_edges(faces: list[TopoDS_Face], topo: Topology, allowed: Calla
                 bared[ei] = params
                 topo.edge_params[ei] = params[[0, -1]]
     for wire in (w for face in faces for w in explore(face, TopAbs_WIRE, TopoDS.Wire_s)) if bared else ():
-        own = [topo.edge_index(e) for e in explore(wire, TopAbs_EDGE, TopoDS.Edge_s) if not BRep_Tool.Degenerated_s(e)]
-        if sum(len(topo.edge_params.get(ei, ())) - 1 for ei in own) < 3:
-            topo.edge_params.update((ei, bared[ei]) for ei in own if ei in bared)
+        own = [topo.edge_facts(e) for e in explore(wire, TopAbs_EDGE, TopoDS.Edge_s)]
+        kept = [ei for ei, v1, _, v2, _, degenerate in own  # an edge collapse_short_edges made a point is no segment
+                if not degenerate and (v1 == v2 or topo.root(v1) != topo.root(v2))]
+        if sum(len(topo.edge_params.get(ei, ())) - 1 for ei in kept) < 3:
+            topo.edge_params.update((ei, bared[ei]) for ei, *_ in own if ei in bared)
 
 
 def face_width(face: TopoDS_Face, topo: Topology) -> float:
