@@ -12,6 +12,9 @@ faces in the order amprep reads them; a face whose (u,v) does not give back gmsh
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -52,9 +55,42 @@ def _size_callback(gmsh, tol: float):  # type: ignore[no-untyped-def]
     return size
 
 
-def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ...]) -> dict:  # type: ignore[type-arg]
-    """{'mesh': Mesh (face ids as amprep's), 'seconds' (import and meshing, the Python size callback included),
-    'max_error' (mm, over the measured faces), 'over' (triangles over `tol`), 'unmeasured' (faces)}."""
+def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ...],
+              timeout: float = 900.0) -> dict | None:  # type: ignore[type-arg]
+    """{'mesh': Mesh (face ids as amprep's), 'seconds' (gmsh's import and meshing, the Python size callback
+    included), 'max_error' (mm, over the measured faces), 'over' (triangles over `tol`), 'unmeasured' (faces)}; gmsh
+    runs in a child process, None when it fails or takes over `timeout` seconds."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "gmsh.npz"
+        try:
+            subprocess.run([sys.executable, __file__, str(path), str(tol), str(out)], check=True, timeout=timeout,
+                           capture_output=True)
+        except (subprocess.CalledProcessError, subprocess.TimeoutExpired):
+            return None
+        d = dict(np.load(out))
+    coord, tri, face_ids, uv = d["coord"], d["tri"], d["face"], d["uv"]
+    max_error, over, unmeasured = 0.0, 0, 0
+    scale = float(np.ptp(coord, axis=0).max())
+    for f in np.unique(face_ids):
+        sel = face_ids == f
+        surface = surface_of(model.faces[f]) if f < len(model.faces) else None
+        corners = coord[tri[sel]]
+        if surface is None:
+            unmeasured += 1
+            continue
+        fuv = unwrap_corners(uv[sel], surface.periods)
+        if np.abs(surface.evaluate(fuv.reshape(-1, 2)) - corners.reshape(-1, 3)).max() > 1e-6 * scale + 1e-6:
+            unmeasured += 1
+            continue
+        e = triangle_chordal_error(corners, fuv, surface, affine=surface.affine)
+        max_error, over = max(max_error, float(e.max())), over + int((e > tol).sum())
+    mesh = Mesh(coord, tri, face_ids, faces=faces)
+    return {"mesh": mesh, "seconds": float(d["seconds"]), "max_error": max_error, "over": over,
+            "unmeasured": unmeasured}
+
+
+def _run(path: Path, tol: float, out: Path) -> None:
+    """In the child: gmsh's mesh of `path` at `tol`, saved to `out` (coord, tri, face (amprep's ids), uv, seconds)."""
     import gmsh
 
     t0 = time.perf_counter()
@@ -84,21 +120,9 @@ def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ..
             uvs.append(np.asarray(gmsh.model.getParametrization(2, s, coord[t].ravel())).reshape(-1, 3, 2))
     finally:
         gmsh.finalize()
-    tri, face_ids, uv = np.concatenate(tris), np.concatenate(ids), np.concatenate(uvs)
-    max_error, over, unmeasured = 0.0, 0, 0
-    scale = float(np.ptp(coord, axis=0).max())
-    for f in np.unique(face_ids):
-        sel = face_ids == f
-        surface = surface_of(model.faces[f]) if f < len(model.faces) else None
-        corners = coord[tri[sel]]
-        if surface is None:
-            unmeasured += 1
-            continue
-        fuv = unwrap_corners(uv[sel], surface.periods)
-        if np.abs(surface.evaluate(fuv.reshape(-1, 2)) - corners.reshape(-1, 3)).max() > 1e-6 * scale + 1e-6:
-            unmeasured += 1
-            continue
-        e = triangle_chordal_error(corners, fuv, surface, affine=surface.affine)
-        max_error, over = max(max_error, float(e.max())), over + int((e > tol).sum())
-    mesh = Mesh(coord, tri, face_ids, faces=faces)
-    return {"mesh": mesh, "seconds": seconds, "max_error": max_error, "over": over, "unmeasured": unmeasured}
+    np.savez(out, coord=coord, tri=np.concatenate(tris), face=np.concatenate(ids), uv=np.concatenate(uvs),
+             seconds=seconds)
+
+
+if __name__ == "__main__":
+    _run(Path(sys.argv[1]), float(sys.argv[2]), Path(sys.argv[3]))
