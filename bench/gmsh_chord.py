@@ -5,8 +5,9 @@ principal curvature there (the sagitta of a chord of that length on a circle of 
 mesher's own lattice SAFETY); on an edge the least of that over the faces it bounds and of its own curvature's
 size; no limit where nothing is curved (sizes then grow from the boundary, gmsh's default). The same isotropic
 rule the quality mesher's (u,v) cells follow, so its counts compare with ours; its chordal error is then measured
-with amprep's own measure in each triangle's (u,v) on the B-rep face gmsh meshed (gmsh's surface tags are the
-faces in the order amprep reads them; a face whose (u,v) does not give back gmsh's points is left unmeasured).
+with amprep's own measure in each triangle's (u,v) on the B-rep face gmsh meshed (gmsh numbers the faces in its own
+order: each is matched to amprep's by bounding box and by its (u,v) giving back gmsh's points, else by its corners'
+projections lying on the surface, whose (u,v) are then used; one that matches none is left unmeasured).
 """
 
 from __future__ import annotations
@@ -19,6 +20,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from OCP.Bnd import Bnd_Box
+from OCP.BRep import BRep_Tool
+from OCP.BRepBndLib import BRepBndLib
+from OCP.gp import gp_Pnt
+from OCP.ShapeAnalysis import ShapeAnalysis_Surface
 
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import surface_of
@@ -69,28 +75,70 @@ def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ..
             return None
         d = dict(np.load(out))
     coord, tri, face_ids, uv = d["coord"], d["tri"], d["face"], d["uv"]
-    max_error, over, unmeasured = 0.0, 0, 0
     scale = float(np.ptp(coord, axis=0).max())
-    for f in np.unique(face_ids):
+    face_ids = _our_faces(face_ids, d["boxes"], coord, tri, uv, model, 1e-6 * scale + 1e-6)
+    max_error, over = 0.0, 0
+    for f in np.unique(face_ids[face_ids >= 0]):
         sel = face_ids == f
-        surface = surface_of(model.faces[f]) if f < len(model.faces) else None
-        corners = coord[tri[sel]]
-        if surface is None:
-            unmeasured += 1
-            continue
-        fuv = unwrap_corners(uv[sel], surface.periods)
-        if np.abs(surface.evaluate(fuv.reshape(-1, 2)) - corners.reshape(-1, 3)).max() > 1e-6 * scale + 1e-6:
-            unmeasured += 1
-            continue
-        e = triangle_chordal_error(corners, fuv, surface, affine=surface.affine)
+        surface = surface_of(model.faces[f])
+        e = triangle_chordal_error(coord[tri[sel]], unwrap_corners(uv[sel], surface.periods), surface,
+                                   affine=surface.affine)
         max_error, over = max(max_error, float(e.max())), over + int((e > tol).sum())
-    mesh = Mesh(coord, tri, face_ids, faces=faces)
+    unmeasured = len(np.unique(d["face"][face_ids < 0]))
+    mesh = Mesh(coord, tri, face_ids.astype(np.int32), faces=faces)
     return {"mesh": mesh, "seconds": float(d["seconds"]), "max_error": max_error, "over": over,
             "unmeasured": unmeasured}
 
 
+def _our_faces(gmsh_face: np.ndarray, boxes: np.ndarray, coord: np.ndarray, tri: np.ndarray, uv: np.ndarray,
+               model: CadModel, close: float) -> np.ndarray:
+    """(t,) amprep's face id of each of gmsh's triangles (−1: none found): gmsh numbers the faces in its own order, so
+    each of its faces (boxes (F, 6) its bounding boxes) is matched to one of ours whose bounding box is within 1 % of
+    the part's size and whose surface, at gmsh's (u,v) of the face's corners, gives back gmsh's points (to `close`)."""
+    ours = []
+    for face in model.faces:
+        box = Bnd_Box()
+        BRepBndLib.Add_s(face, box)
+        ours.append(box.Get())
+    ours_box = np.array(ours)
+    reach = 0.01 * float(np.ptp(coord, axis=0).max())
+    out = np.full(len(gmsh_face), -1, np.int64)
+    surfaces: dict[int, object] = {}
+    for g in np.unique(gmsh_face):
+        sel = np.flatnonzero(gmsh_face == g)
+        pts, guv = coord[tri[sel]].reshape(-1, 3), uv[sel]
+        candidates = np.flatnonzero(np.abs(ours_box - boxes[g]).max(axis=1) <= reach)
+        for f in candidates:
+            surface = surfaces.setdefault(int(f), surface_of(model.faces[f]))
+            fuv = unwrap_corners(guv, surface.periods).reshape(-1, 2)  # type: ignore[attr-defined]
+            if np.abs(surface.evaluate(fuv) - pts).max() <= close:  # type: ignore[attr-defined]
+                out[sel] = f
+                break
+        else:  # gmsh's (u,v) is not ours on any: the corners projected on each candidate's surface instead
+            for f in candidates:
+                projected = _projected(model.faces[f], pts, close)
+                if projected is not None:
+                    out[sel], uv[sel] = f, projected.reshape(-1, 3, 2)
+                    break
+    return out
+
+
+def _projected(face, pts: np.ndarray, close: float) -> np.ndarray | None:  # type: ignore[no-untyped-def]
+    """(n, 2) the (u,v) of points (n, 3) on the face's surface, None when one lies farther than 1000 × `close`."""
+    surface = ShapeAnalysis_Surface(BRep_Tool.Surface_s(face))
+    out = np.empty((len(pts), 2))
+    for i, p in enumerate(pts):
+        q = gp_Pnt(*p)
+        uv = surface.ValueOfUV(q, close)
+        if surface.Gap() > 1000 * close:
+            return None
+        out[i] = uv.X(), uv.Y()
+    return out
+
+
 def _run(path: Path, tol: float, out: Path) -> None:
-    """In the child: gmsh's mesh of `path` at `tol`, saved to `out` (coord, tri, face (amprep's ids), uv, seconds)."""
+    """In the child: gmsh's mesh of `path` at `tol`, saved to `out` (coord, tri, face (its faces in order), uv,
+    boxes (its faces' bounding boxes), seconds)."""
     import gmsh
 
     t0 = time.perf_counter()
@@ -109,19 +157,20 @@ def _run(path: Path, tol: float, out: Path) -> None:
         coord = np.asarray(coord).reshape(-1, 3)
         where = np.zeros(int(np.max(tags)) + 1, np.int64)
         where[np.asarray(tags, np.int64)] = np.arange(len(tags))
-        tris, ids, uvs = [], [], []
+        tris, ids, uvs, boxes = [], [], [], []  # type: ignore[var-annotated]
         for _, s in gmsh.model.getEntities(2):
             types, _, nodes = gmsh.model.mesh.getElements(2, s)
             if 2 not in list(types):
                 continue
             t = where[np.asarray(nodes[list(types).index(2)], np.int64).reshape(-1, 3)]
             tris.append(t)
-            ids.append(np.full(len(t), s - 1, np.int32))
+            ids.append(np.full(len(t), len(boxes), np.int32))
+            boxes.append(gmsh.model.getBoundingBox(2, s))
             uvs.append(np.asarray(gmsh.model.getParametrization(2, s, coord[t].ravel())).reshape(-1, 3, 2))
     finally:
         gmsh.finalize()
     np.savez(out, coord=coord, tri=np.concatenate(tris), face=np.concatenate(ids), uv=np.concatenate(uvs),
-             seconds=seconds)
+             boxes=np.array(boxes), seconds=seconds)
 
 
 if __name__ == "__main__":
