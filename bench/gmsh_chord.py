@@ -92,9 +92,9 @@ def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ..
 
 def _our_faces(gmsh_face: np.ndarray, boxes: np.ndarray, coord: np.ndarray, tri: np.ndarray, uv: np.ndarray,
                model: CadModel, close: float) -> np.ndarray:
-    """(t,) amprep's face id of each of gmsh's triangles (−1: none found): gmsh numbers the faces in its own order, so
-    each of its faces (boxes (F, 6) its bounding boxes) is matched to one of ours whose bounding box is within 1 % of
-    the part's size and whose surface, at gmsh's (u,v) of the face's corners, gives back gmsh's points (to `close`)."""
+    """(t,) amprep's face id of each of gmsh's triangles (−1: none found): gmsh may number the faces in its own order
+    (CTC-02's), so each of its faces is tried on ours of the same number first, then on ours whose bounding box is
+    within 1 % of the part's size of its own (boxes (F, 6)): the first whose surface, at gmsh's (u,v) of the face's corners, gives back gmsh's points (to `close`)."""
     ours = []
     for face in model.faces:
         box = Bnd_Box()
@@ -107,7 +107,8 @@ def _our_faces(gmsh_face: np.ndarray, boxes: np.ndarray, coord: np.ndarray, tri:
     for g in np.unique(gmsh_face):
         sel = np.flatnonzero(gmsh_face == g)
         pts, guv = coord[tri[sel]].reshape(-1, 3), uv[sel]
-        candidates = np.flatnonzero(np.abs(ours_box - boxes[g]).max(axis=1) <= reach)
+        near = np.flatnonzero(np.abs(ours_box - boxes[g]).max(axis=1) <= reach)
+        candidates = np.concatenate([[g] if g < len(model.faces) else [], near[near != g]]).astype(np.int64)
         for f in candidates:
             surface = surfaces.setdefault(int(f), surface_of(model.faces[f]))
             fuv = unwrap_corners(guv, surface.periods).reshape(-1, 2)  # type: ignore[attr-defined]
