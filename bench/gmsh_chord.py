@@ -27,12 +27,11 @@ from OCP.gp import gp_Pnt
 from OCP.ShapeAnalysis import ShapeAnalysis_Surface
 
 from amprep.geometry.cad.read import CadModel
-from amprep.geometry.cad.surfaces import surface_of
+from amprep.geometry.cad.surfaces import Surface, surface_of
 from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.measure.chordal import triangle_chordal_error
+from amprep.geometry.meshing.lattice import SAFETY
 from amprep.geometry.placement.project import unwrap_corners
-
-SAFETY = 0.95  # as lattice.SAFETY
 
 
 def _size_callback(gmsh, tol: float):  # type: ignore[no-untyped-def]
@@ -76,11 +75,12 @@ def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ..
         d = dict(np.load(out))
     coord, tri, face_ids, uv = d["coord"], d["tri"], d["face"], d["uv"]
     scale = float(np.ptp(coord, axis=0).max())
-    face_ids = _our_faces(face_ids, d["boxes"], coord, tri, uv, model, 1e-6 * scale + 1e-6)
+    surfaces: dict[int, Surface] = {}
+    face_ids = _our_faces(face_ids, d["boxes"], coord, tri, uv, model, surfaces, 1e-6 * scale + 1e-6)
     max_error, over = 0.0, 0
     for f in np.unique(face_ids[face_ids >= 0]):
         sel = face_ids == f
-        surface = surface_of(model.faces[f])
+        surface = surfaces[int(f)]
         e = triangle_chordal_error(coord[tri[sel]], unwrap_corners(uv[sel], surface.periods), surface,
                                    affine=surface.affine)
         max_error, over = max(max_error, float(e.max())), over + int((e > tol).sum())
@@ -91,10 +91,12 @@ def mesh_gmsh(path: Path, tol: float, model: CadModel, faces: tuple[FaceInfo, ..
 
 
 def _our_faces(gmsh_face: np.ndarray, boxes: np.ndarray, coord: np.ndarray, tri: np.ndarray, uv: np.ndarray,
-               model: CadModel, close: float) -> np.ndarray:
+               model: CadModel, surfaces: dict[int, Surface], close: float) -> np.ndarray:
     """(t,) amprep's face id of each of gmsh's triangles (−1: none found): gmsh may number the faces in its own order
     (CTC-02's), so each of its faces is tried on ours of the same number first, then on ours whose bounding box is
-    within 1 % of the part's size of its own (boxes (F, 6)): the first whose surface, at gmsh's (u,v) of the face's corners, gives back gmsh's points (to `close`)."""
+    within 1 % of the part's size of its own (boxes (F, 6)): the first whose surface, at gmsh's (u,v) of the face's
+    corners, gives back gmsh's points (to `close`), else the first its corners project onto. Each surface is read
+    once, into `surfaces`."""
     ours = []
     for face in model.faces:
         box = Bnd_Box()
@@ -103,16 +105,17 @@ def _our_faces(gmsh_face: np.ndarray, boxes: np.ndarray, coord: np.ndarray, tri:
     ours_box = np.array(ours)
     reach = 0.01 * float(np.ptp(coord, axis=0).max())
     out = np.full(len(gmsh_face), -1, np.int64)
-    surfaces: dict[int, object] = {}
     for g in np.unique(gmsh_face):
         sel = np.flatnonzero(gmsh_face == g)
         pts, guv = coord[tri[sel]].reshape(-1, 3), uv[sel]
         near = np.flatnonzero(np.abs(ours_box - boxes[g]).max(axis=1) <= reach)
         candidates = np.concatenate([[g] if g < len(model.faces) else [], near[near != g]]).astype(np.int64)
         for f in candidates:
-            surface = surfaces.setdefault(int(f), surface_of(model.faces[f]))
-            fuv = unwrap_corners(guv, surface.periods).reshape(-1, 2)  # type: ignore[attr-defined]
-            if np.abs(surface.evaluate(fuv) - pts).max() <= close:  # type: ignore[attr-defined]
+            if int(f) not in surfaces:
+                surfaces[int(f)] = surface_of(model.faces[f])
+            surface = surfaces[int(f)]
+            fuv = unwrap_corners(guv, surface.periods).reshape(-1, 2)
+            if np.abs(surface.evaluate(fuv) - pts).max() <= close:
                 out[sel] = f
                 break
         else:  # gmsh's (u,v) is not ours on any: the corners projected on each candidate's surface instead

@@ -14,6 +14,7 @@ import csv
 import os
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -117,7 +118,7 @@ def _print(part: str, label: str, r: dict) -> None:
           flush=True)
 
 
-def write(rows: list[tuple[str, str, dict]], tol: float, name: str, failed: list[str] = (),  # type: ignore[assignment]
+def write(rows: list[tuple[str, str, dict]], tol: float, name: str, failed: Sequence[str] = (),
           timeout: float = 0.0) -> None:
     docs = ROOT / "docs"
     with open(docs / f"{name}.csv", "w", newline="") as fh:
