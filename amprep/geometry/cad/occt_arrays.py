@@ -1,9 +1,10 @@
 """numpy arrays from OCCT values (a point, vector or direction as (3,), a TColStd/TColgp 1-D array as (n,)), and
-1-D OCCT arrays from numpy."""
+1-D OCCT arrays from numpy, and a curve's points at many params."""
 
 from __future__ import annotations
 
 import numpy as np
+from OCP.GeomAbs import GeomAbs_Circle, GeomAbs_Line
 
 
 def vec(p) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -22,3 +23,33 @@ def to_array1(values: np.ndarray, cls):  # type: ignore[no-untyped-def]
 def array1(arr) -> np.ndarray:  # type: ignore[no-untyped-def]
     """(n,) float values of a 1-D OCCT array, Lower() to Upper()."""
     return np.array([arr.Value(i) for i in range(arr.Lower(), arr.Upper() + 1)], dtype=float)
+
+
+#: a closed-form line or circle must give OCCT's own points at its ends to this × (1 + |point|), else it is not used
+_CLOSED_FORM_RTOL = 1e-9
+
+
+def curve_values(curve, t: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """(n, d) the points at params t (n,) of a curve adaptor (BRepAdaptor_Curve: d = 3; Geom2dAdaptor_Curve: d = 2):
+    a line (L + t D) or circle (C + R (cos t X + sin t Y)) in closed form, checked against the adaptor's own Value at
+    the first and last param; any other curve point by point."""
+    t = np.asarray(t, float).ravel()
+    kind = curve.GetType()
+    out = None
+    if len(t) > 2 and kind == GeomAbs_Line:
+        line = curve.Line()
+        out = _xy(line.Location()) + t[:, None] * _xy(line.Direction())
+    elif len(t) > 2 and kind == GeomAbs_Circle:
+        circle = curve.Circle()
+        centre, x, y = _xy(circle.Location()), _xy(circle.XAxis().Direction()), _xy(circle.YAxis().Direction())
+        out = centre + circle.Radius() * (np.cos(t)[:, None] * x + np.sin(t)[:, None] * y)
+    if out is not None:
+        ends = np.array([_xy(curve.Value(float(t[0]))), _xy(curve.Value(float(t[-1])))])
+        if np.all(np.abs(out[[0, -1]] - ends) <= _CLOSED_FORM_RTOL * (1 + np.abs(ends))):
+            return out
+    return np.array([_xy(curve.Value(float(x))) for x in t], float).reshape(len(t), -1)
+
+
+def _xy(p) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """(2,) or (3,) coordinates of a 2-D or 3-D gp point, vector or direction."""
+    return np.array(p.Coord())

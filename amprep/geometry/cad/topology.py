@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
+from OCP.BRepGProp import BRepGProp
+from OCP.GProp import GProp_GProps
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
@@ -52,6 +54,7 @@ class Topology:
     edge_params: dict[int, np.ndarray] = field(default_factory=dict)
     parent: dict[int, int] = field(default_factory=dict)  # union-find over B-rep vertices of collapsed edges
     _facts: dict[int, tuple[int, int, float, int, float, bool]] = field(default_factory=dict, repr=False)
+    _areas: dict[TopoDS_Face, float] = field(default_factory=dict, repr=False)
 
     def merge_vertices(self, a: int, b: int) -> None:
         """Record that the mesher collapsed an edge: its two end vertices become one mesh vertex."""
@@ -97,6 +100,16 @@ class Topology:
             v1, v2 = TopExp.FirstVertex_s(e), TopExp.LastVertex_s(e)
             known = self._facts[ei] = (ei, self.vertex_index(v1), BRep_Tool.Parameter_s(v1, e), self.vertex_index(v2),
                                        BRep_Tool.Parameter_s(v2, e), bool(BRep_Tool.Degenerated_s(e)))
+        return known
+
+
+    def face_area(self, face: TopoDS_Face) -> float:
+        """|∫∫ dA| of a face (OCCT's surface integral), asked of OCCT once per face (a cache on the topology)."""
+        known = self._areas.get(face)
+        if known is None:
+            props = GProp_GProps()
+            BRepGProp.SurfaceProperties_s(face, props)
+            known = self._areas[face] = abs(props.Mass())
         return known
 
 

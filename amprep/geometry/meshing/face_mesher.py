@@ -6,10 +6,12 @@ from __future__ import annotations
 import numpy as np
 from OCP.BRep import BRep_Tool
 from OCP.BRepTools import BRepTools_WireExplorer
+from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.occt_arrays import curve_values
 from amprep.geometry.cad.pcurve_shifts import ordered_edges
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, winds_inward
@@ -96,8 +98,7 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             if not degenerate and v1 != v2 and topo.root(v1) == topo.root(v2) and len(params) == 2:
                 continue  # an edge collapse_short_edges collapsed: its two ends are one node, the next edge's
             n = len(params) - 1  # the last point starts the next edge
-            for t in params[:n]:
-                uvs.append(pcurve.Value(t).Coord())
+            uvs.append(curve_values(Geom2dAdaptor_Curve(pcurve), params[:n]).reshape(-1, 2))
             vtx = np.full(n, -1, np.int64)
             vtx[0] = v1 if abs(params[0] - p1) <= abs(params[0] - p2) else v2
             if degenerate:
@@ -108,7 +109,7 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             segs.append(np.full(n, ei, np.int64))
             spans.append(np.stack([params[:n], params[1:n + 1]], axis=1))
         if uvs:
-            loops.append(dict(uv=np.array(uvs, float), vertex=np.concatenate(verts), edge=np.concatenate(edges),
+            loops.append(dict(uv=np.concatenate(uvs), vertex=np.concatenate(verts), edge=np.concatenate(edges),
                               param=np.concatenate(pars), segment=np.concatenate(segs), span=np.concatenate(spans)))
     return loops
 

@@ -10,9 +10,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from OCP.BRep import BRep_Tool
+from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.TopoDS import TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.cad.occt_arrays import curve_values
 from amprep.geometry.cad.surfaces import CONE, CYLINDER, SPHERE, TORUS, Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
@@ -245,7 +247,7 @@ def _param_of_v(face: TopoDS_Face, edge, rows: np.ndarray) -> np.ndarray | None:
     if pc is None:
         return None
     ts = np.linspace(first, last, PCURVE_SAMPLES)
-    vs = np.array([pc.Value(float(t)).Y() for t in ts])
+    vs = curve_values(Geom2dAdaptor_Curve(pc), ts)[:, 1]
     dv = np.diff(vs)
     if not ((dv > 0).all() or (dv < 0).all()):
         return None

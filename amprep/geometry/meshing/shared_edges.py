@@ -4,17 +4,18 @@ faces with a pole (a degenerated edge)."""
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 
 import numpy as np
 from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
-from OCP.BRepGProp import BRepGProp
 from OCP.GCPnts import GCPnts_TangentialDeflection
-from OCP.GProp import GProp_GProps
+from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_WIRE
 from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 
+from amprep.geometry.cad.occt_arrays import curve_values
 from amprep.geometry.cad.surfaces import CYLINDER, SPHERE, TORUS, Surface, uv_extent
 from amprep.geometry.cad.topology import Topology, explore, face_edges
 from amprep.geometry.core.vectors import cross
@@ -34,7 +35,7 @@ def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.n
     # GCPnts may return a parameter a hair from an end (seen: 2e-6 mm on CTC-02): a segment that short makes a
     # needle with any third point; drop interior points nearer than MIN_SPACING × tolerance to the point before
     # them or to the end
-    pts = np.array([curve.Value(t).Coord() for t in params])
+    pts = curve_values(curve, params)
     eps = MIN_SPACING * tolerance
     if (np.linalg.norm(np.diff(pts, axis=0), axis=1) > eps).all() and (
             np.linalg.norm(pts[-1] - pts[1:-1], axis=1) > eps).all():
@@ -52,10 +53,10 @@ def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.n
 def edge_sagitta(edge: TopoDS_Edge, params: np.ndarray) -> np.ndarray:
     """(n−1,) max distance from the edge curve at 1/4, 1/2, 3/4 of each parameter segment to its chord."""
     curve = BRepAdaptor_Curve(edge)
-    pts = np.array([curve.Value(t).Coord() for t in params])
+    pts = curve_values(curve, params)
     fr = np.array([0.25, 0.5, 0.75])
     mids = params[:-1, None] + fr[None, :] * np.diff(params)[:, None]
-    mid_pts = np.array([curve.Value(t).Coord() for t in mids.ravel()]).reshape(-1, 3, 3)
+    mid_pts = curve_values(curve, mids.ravel()).reshape(-1, 3, 3)
     a, b = pts[:-1, None], pts[1:, None]
     ab = b - a
     len2 = np.maximum((ab * ab).sum(-1), 1e-300)
@@ -162,8 +163,7 @@ UV_STRAIGHT = 1e-6
 
 def edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
     """(n, 3) the edge curve's points at params (n,)."""
-    curve = BRepAdaptor_Curve(edge)
-    return np.array([curve.Value(float(t)).Coord() for t in params]).reshape(-1, 3)
+    return curve_values(BRepAdaptor_Curve(edge), params).reshape(-1, 3)
 
 
 def _straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
@@ -186,7 +186,7 @@ def _curved_in_uv(edge, face: TopoDS_Face, params: np.ndarray) -> bool:  # type:
     if pc is None:
         return True
     t = np.interp([0, 0.25, 0.5, 0.75, 1], [0, 1], [params[0], params[-1]])
-    uv = np.array([[q.X(), q.Y()] for q in (pc.Value(float(x)) for x in t)])
+    uv = curve_values(Geom2dAdaptor_Curve(pc), t)
     chord = uv[-1] - uv[0]
     length = float(np.linalg.norm(chord))
     if length <= 0:
@@ -224,9 +224,7 @@ def bare_straight_edges(faces: list[TopoDS_Face], topo: Topology, allowed: Calla
 
 
 def face_width(face: TopoDS_Face, topo: Topology) -> float:
-    """2A/P of a face: its area (OCCT's surface integral) over half its perimeter (its edges' discretisations)."""
-    props = GProp_GProps()
-    BRepGProp.SurfaceProperties_s(face, props)
+    """2A/P of a face: its area (Topology.face_area) over half its perimeter (its edges' discretisations)."""
     perimeter = 0.0
     for edge in face_edges(face):
         if BRep_Tool.Degenerated_s(edge):
@@ -234,7 +232,7 @@ def face_width(face: TopoDS_Face, topo: Topology) -> float:
         params = topo.edge_params.get(topo.edge_index(edge))
         if params is not None and len(params) > 1:
             perimeter += edge_length(edge, params)
-    return 2 * abs(props.Mass()) / perimeter if perimeter > 0 else np.inf
+    return 2 * topo.face_area(face) / perimeter if perimeter > 0 else np.inf
 
 
 def split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
@@ -354,10 +352,10 @@ def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[
         for face, surface in faces:
             pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
             if pcurve is not None:
-                uv = np.array([pcurve.Value(float(x)).Coord() for x in t]).reshape(-1, 2)
+                uv = curve_values(Geom2dAdaptor_Curve(pcurve), t).reshape(-1, 2)
                 by_face.setdefault(id(surface), (surface, []))[1].append((k, uv, chord))
     for surface, pairs in by_face.values():
-        median = _median_speeds(surface, pairs[0][1]) if surface.bounds is not None else None
+        median = _bounded_median_speeds(surface) if surface.bounds is not None else None
         uv = np.concatenate([uv for _, uv, _ in pairs])
         floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(
             median if median is not None else _median_speeds(surface, q), q.shape) for _, q, _ in pairs])
@@ -375,6 +373,18 @@ def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[
             start += len(q)
     with np.errstate(divide="ignore"):
         return [np.where(b > 0, np.sqrt(target / b), np.inf) for b in (b.reshape(-1, 3).max(axis=1) for b in out)]
+
+
+#: _median_speeds of each face with known (u,v) bounds, a function of the surface alone: asked once per surface
+_MEDIANS: weakref.WeakKeyDictionary[Surface, np.ndarray] = weakref.WeakKeyDictionary()
+
+
+def _bounded_median_speeds(surface: Surface) -> np.ndarray:
+    """_median_speeds over the bounds of a surface that has them, once per surface."""
+    known = _MEDIANS.get(surface)
+    if known is None:
+        known = _MEDIANS[surface] = _median_speeds(surface, np.zeros((2, 2)))
+    return known
 
 
 def _median_speeds(surface: Surface, uv: np.ndarray) -> np.ndarray:
