@@ -247,3 +247,33 @@ def test_the_dtmb_hull_quality_mesh_does_not_cross_itself():
 
     mesh = mesh_model(read_cad(corpus("dtmb5415_bow_hull.iges")), MeshParams(tolerance=0.34, mesher="quality")).mesh
     assert self_intersections(mesh)[0] == 0
+
+
+def test_a_quality_face_its_refinement_cannot_bring_within_is_meshed_by_the_default_mesher(monkeypatch):
+    """Forced: the quality mesher's local refinement stops short everywhere (its patch handed back unrefined, as when
+    every insertion point is nearer than the spacing to a node), so each round meets the same mesh again. After three
+    rounds over, such a face is meshed as the default mesher meshes its own faces, within the tolerance, and listed
+    in fallback_faces as quality_refinement; the solid stays closed."""
+    from dataclasses import replace
+
+    from amprep.geometry.meshing import face_mesher, lattice
+
+    def stops_short(real):
+        def refine(patch, error, *args, **kwargs):
+            if patch.meshed_by in ("quality", "lattice"):
+                return replace(patch, error=np.asarray(error, float))
+            return real(patch, error, *args, **kwargs)
+        return refine
+
+    for module in (face_mesher, lattice, enforce):
+        monkeypatch.setattr(module, "refine_patch", stops_short(module.refine_patch))
+    tol = 0.34
+    r = mesh_model(read_cad(corpus("featuretype_inch_ap214.step"), "step"),
+                   MeshParams(tolerance=tol, mesher="quality", parallel=False))
+    plain = sorted(i for i, why in r.fallback_faces.items() if why == "quality_refinement")
+    assert len(plain) >= 5  # the faces whose first quality mesh had a triangle over (18 on this part)
+    assert all(r.mesh.faces[i].meshed_by == "fallback" for i in plain)
+    assert (r.face_error[plain] <= tol).all()
+    c = check_mesh(r.mesh)
+    assert c.closed and c.degenerate_triangles == 0 and manifold3d_accepts(r.mesh)
+    assert r.max_error <= tol

@@ -94,6 +94,7 @@ class FaceStates:
     expected: dict[int, float] = field(default_factory=dict)  # that estimate per face, meshed once (_estimate)
     gaps: BrepGaps = field(default_factory=BrepGaps)  # the B-rep's gaps at the faces' boundaries (weld.seat_boundaries)
     tight: set[int] = field(default_factory=set)  # faces over in two rounds running: meshed to less_gap from then on
+    plain: set[int] = field(default_factory=set)  # the quality mesher's faces over in three: the default's mesher then
 
     def __post_init__(self) -> None:
         self.errors = [np.zeros(0)] * len(self.patches)
@@ -128,6 +129,8 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
                                     and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
         if not over:
             break
+        if f.params.quality:  # over three times running, once to less_gap: the quality mesher cannot, the plain one
+            _to_plain(f, f.tight.intersection(over))
         f.tight.update(before.intersection(over))  # over twice running: the B-rep's gap is reckoned with from now
         todo = _split_edges(f, over)
         _mend(f, over, todo)
@@ -168,17 +171,18 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         old = f.patches[i]
         face_target = less_gap(target, f.gaps.face.get(i, 0.0)) if i in f.tight else target
         seeds = None
-        if old is not None and old.uv is not None:
-            seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]
+        if old is not None and old.uv is not None and not (i in f.plain and old.meshed_by in ("quality", "lattice")):
+            seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]  # not the points the quality mesh met again
         try:
-            if i in f.lattice:
+            if i in f.lattice and i not in f.plain:
                 face = f.model.faces[i]
                 lattice = mesh_lattice(i, face, boundary_loops(face, f.topo, target, f.params.angular),
                                        f.surfaces[i], f.lattice[i], face_target, f.params.check_order)  # type: ignore[arg-type]
                 if lattice is not None:
                     return lattice
             return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], face_target,  # type: ignore[arg-type]
-                             f.params.angular, f.params.check_order, seeds, f.min_area, quality=f.params.quality)
+                             f.params.angular, f.params.check_order, seeds, f.min_area,
+                             quality=f.params.quality and i not in f.plain)
         except AmprepError as exc:
             if exc.code != ErrorCode.MESHING_FAILED:  # a cancel seen at a checkpoint stops the job, not the face
                 raise
@@ -191,6 +195,15 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     for i, patch in meshed.items():
         f.patches[i] = patch
     f.unmeshed = sorted({i for i in f.unmeshed if f.patches[i] is None} | {i for i, p in meshed.items() if p is None})
+
+
+def _to_plain(f: FaceStates, faces: set[int]) -> None:
+    """The quality mesher's faces over the tolerance in three rounds running (its refinement stopped short and each
+    round met the same mesh again) meshed from then on as the default mesher meshes its own faces (from the boundary,
+    refined alone), and listed in `fallback` as `quality_refinement`."""
+    for i in sorted(faces - f.plain):
+        f.plain.add(i)
+        f.fallback[i] = "quality_refinement"
 
 
 def _uncross(f: FaceStates) -> set[int]:
