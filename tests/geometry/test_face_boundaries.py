@@ -198,3 +198,33 @@ def test_straight_edges_keep_only_the_points_the_grading_cuts():
     on_edge = bar.vertices[(np.abs(bar.vertices[:, 1]) < 1e-9) & (np.abs(bar.vertices[:, 2]) < 1e-9)]
     assert np.allclose(np.sort(on_edge[:, 0]), [0, 5, 10, 20, 30, 35, 40])
     assert check_mesh(bar).closed and manifold3d_accepts(bar)
+
+
+def test_thin_strips_get_one_long_edge_staggered_so_their_triangles_are_isosceles():
+    """A chamfer 0.5 mm wide along a 40 mm edge is a strip: both long edges cut alike by the grading, a triangle
+    spans it from one to the other, right-angled (22° at 2.5 segments per width) where their points face each other.
+    One long edge's points are moved to the middles of its segments: every strip triangle's apex then lies between
+    the other edge's points, its smallest angle over 30°. A 40 × 4 × 4 bar's four sides, strips sharing edges, get
+    alternate edges moved, so each side is staggered."""
+    import cadquery as cq
+
+    from amprep.geometry.measure.regularity import min_angles
+
+    shape = cq.Workplane().box(40, 20, 10).edges("|X").chamfer(0.5).val().wrapped
+    r = mesh_model(model_from_shape(shape), MeshParams(tolerance=0.1, mesher="quality"))
+    m = r.mesh
+    assert check_mesh(m).closed and manifold3d_accepts(m) and r.max_error <= 0.1
+    strips = [f for f in range(len(m.faces)) if np.ptp(m.vertices[np.unique(m.triangles[m.face_ids == f])], axis=0)[1:].max() < 0.6]
+    assert len(strips) == 4
+    for f in strips:
+        t = m.triangles[m.face_ids == f]
+        x = m.vertices[np.unique(t)]
+        sides = np.unique(np.round(x[:, 1:], 6), axis=0, return_inverse=True)[1].ravel()
+        xs = [np.sort(x[sides == k, 0]) for k in range(2)]
+        assert len(xs[0]) >= 5 and abs(len(xs[0]) - len(xs[1])) == 1  # one edge has one point more: its ends half
+        fewer, more = sorted(xs, key=len)
+        assert (np.searchsorted(fewer, more[1:-1]) == np.arange(1, len(fewer))).all()  # strictly interleaved
+        assert np.degrees(min_angles(m.vertices[t])).min() > 30
+    bar = mesh_model(model_from_shape(cq.Workplane().box(40, 4, 4).val().wrapped),
+                     MeshParams(tolerance=0.34, mesher="quality")).mesh
+    assert np.degrees(min_angles(bar.corners)).min() > 30 and check_mesh(bar).closed

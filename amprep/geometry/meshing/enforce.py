@@ -38,6 +38,7 @@ from amprep.geometry.meshing.shared_edges import (
     grade_edges,
     has_pole,
     split_edge_to_tolerance,
+    stagger_strips,
 )
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING, crossing_segments
 from amprep.geometry.meshing.weld import BrepGaps, seat_boundaries
@@ -273,6 +274,7 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
     collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
     bare_straight_edges(faces, f.topo, lambda ei: _lines_stay_lines(f, ei))
     grade_edges(faces, [f.surfaces[i] for i in remesh], f.topo, f.tol, target)  # type: ignore[misc]
+    stagger_strips(faces, [f.surfaces[i] for i in remesh], f.topo, lambda ei: _all_planes(f, ei))  # type: ignore[misc]
     loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
     planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
                             target, f.params.angular, f.params.max_triangles)
@@ -288,6 +290,12 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
             f.lattice.pop(i, None)
     f.lattice.update((i, p) for i, p in zip(remesh, planned, strict=True) if p is not None)
     return loops, planned
+
+
+def _all_planes(f: FaceStates, edge_index: int) -> bool:
+    """True when every face the edge bounds is a plane."""
+    return all(f.surfaces[i] is not None and f.surfaces[i].surface_type == "plane"  # type: ignore[union-attr]
+               for i in _faces_of_edge(f.model, f.topo, edge_index))
 
 
 def _lines_stay_lines(f: FaceStates, edge_index: int) -> bool:

@@ -310,6 +310,93 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
                 topo.edge_params[ei] = split_segments(topo.edge_params[ei], parts)
 
 
+#: a strip's two long edges are cut alike when their points' fractions of length differ by under this × a segment
+STRIP_MATCH = 1e-3
+
+
+def stagger_strips(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topology,
+                   movable: Callable[[int], bool]) -> None:
+    """On plane strips (_strip: a thin face whose two long edges are cut alike, so its triangles are right, 22° in a
+    strip 2.5 segments wide) one long edge's points are moved to the middles of its segments, its end segments half
+    long: the strip's triangles are then isosceles (39°). Strips that share long edges (a bar's sides) are two-coloured
+    edge by edge so that each has one edge moved where the chain allows; only `movable` edges are moved (every face
+    they bound a plane: no lattice's rows stand on them)."""
+    links: list[tuple[int, int]] = []
+    edges: dict[int, TopoDS_Edge] = {}
+    for face, surface in zip(faces, surfaces, strict=True):
+        strip = _strip(face, surface, topo)
+        if strip is not None:
+            links.append((strip[0], strip[1]))
+            edges.update(strip[2])
+    colour = _two_colours(links, movable)
+    for ei in sorted(e for e, c in colour.items() if c == 1 and movable(e)):
+        params = topo.edge_params[ei]
+        f = _fractions(edges[ei], params)
+        topo.edge_params[ei] = np.concatenate([params[:1], np.interp((f[:-1] + f[1:]) / 2, f, params), params[-1:]])
+
+
+def _strip(face: TopoDS_Face, surface: Surface, topo: Topology) -> tuple[int, int, dict[int, TopoDS_Edge]] | None:
+    """(long edge, the other, the face's edges by index) of a plane strip: one wire of four straight edges, the two
+    short ones shorter than the longest segment of the two long ones, which are cut (into 3 or more) at the same
+    fractions of their lengths (STRIP_MATCH); None for any other face."""
+    if surface.surface_type != "plane" or len(explore(face, TopAbs_WIRE, TopoDS.Wire_s)) != 1:
+        return None
+    sides = {topo.edge_index(e): e for e in face_edges(face) if not BRep_Tool.Degenerated_s(e)}
+    if len(sides) != 4 or any(ei not in topo.edge_params for ei in sides):
+        return None
+    ends = {ei: _ends_by_param(topo, e) for ei, e in sides.items()}
+    pairs = [(a, b) for a in sides for b in sides if a < b and not set(ends[a]) & set(ends[b])]
+    if len(pairs) != 2 or any(len(set(v)) != 2 for v in ends.values()):
+        return None
+    length = {ei: edge_length(e, topo.edge_params[ei]) for ei, e in sides.items()}
+    (a, c), short = sorted(pairs, key=lambda pair: -min(length[ei] for ei in pair))
+    longest = max(float(np.linalg.norm(np.diff(edge_points(sides[ei], topo.edge_params[ei]), axis=0), axis=1).max())
+                  for ei in (a, c))
+    if (max(length[ei] for ei in short) >= longest  # wider than a segment: interior points, not a strip
+            or min(len(topo.edge_params[ei]) for ei in (a, c)) < 4
+            or not all(_straight(e, topo.edge_params[ei]) for ei, e in sides.items())):
+        return None
+    ahead = any({ends[a][0], ends[c][0]} == set(ends[ei]) for ei in short)  # c runs from a's start's side too
+    fa, fc = _fractions(sides[a], topo.edge_params[a]), _fractions(sides[c], topo.edge_params[c])
+    fc = fc if ahead else 1.0 - fc[::-1]
+    if len(fa) != len(fc) or np.abs(fa - fc).max() > STRIP_MATCH * np.diff(fa).min():
+        return None
+    return a, c, sides
+
+
+def _two_colours(links: list[tuple[int, int]], movable: Callable[[int], bool]) -> dict[int, int]:
+    """{edge: 0 or 1}: the strips' long edges coloured so that each link's two differ where the chain is not an odd
+    cycle; each chain started (colour 0) from its least edge that may not move, else its least edge."""
+    near: dict[int, list[int]] = {}
+    for a, c in links:
+        near.setdefault(a, []).append(c)
+        near.setdefault(c, []).append(a)
+    colour: dict[int, int] = {}
+    for start in sorted(near, key=lambda e: (movable(e), e)):
+        if start in colour:
+            continue
+        colour[start], queue = 0, [start]
+        while queue:
+            e = queue.pop(0)
+            for n in sorted(near[e]):
+                if n not in colour:
+                    colour[n] = 1 - colour[e]
+                    queue.append(n)
+    return colour
+
+
+def _ends_by_param(topo: Topology, edge: TopoDS_Edge) -> tuple[int, int]:
+    """(vertex at the edge's smaller parameter, vertex at its larger), after collapses (Topology.root)."""
+    v1, p1, v2, p2 = topo.edge_ends(edge)
+    return (topo.root(v1), topo.root(v2)) if p1 <= p2 else (topo.root(v2), topo.root(v1))
+
+
+def _fractions(edge: TopoDS_Edge, params: np.ndarray) -> np.ndarray:
+    """(n,) the cumulative chord length of an edge's points at params (n,), over its total: 0 … 1."""
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(edge_points(edge, params), axis=0), axis=1))])
+    return along / along[-1]
+
+
 def _stands_anyway(faces: list[tuple[TopoDS_Face, Surface]], points: np.ndarray, target: float) -> bool:
     """True when no segment of an edge (its points (n, 3)) can be cut by bend_sizes: every face it bounds is a cylinder,
     sphere or torus whose largest curvature κ keeps κ L² / 8 ≤ the target on its longest segment L (a triangle of
