@@ -277,12 +277,16 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
                 cap[ei] = (limit, edge)
             if target > 0 and kind != "plane":
                 bent.setdefault(ei, []).append((face, surface))
+    seen: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the last pass's params and points of each edge
+    bends: dict[int, np.ndarray] = {}
     for _ in range(2):
-        points = {ei: edge_points(edge, topo.edge_params[ei]) for ei, (_, edge) in cap.items()
-                  if len(topo.edge_params[ei]) >= 2}
-        standing = [ei for ei in points if ei in bent and ei not in straight
+        same = {ei for ei, (params, _) in seen.items() if params is topo.edge_params[ei]}  # not cut by the last pass
+        points = {ei: seen[ei][1] if ei in same else edge_points(edge, topo.edge_params[ei])
+                  for ei, (_, edge) in cap.items() if len(topo.edge_params[ei]) >= 2}
+        seen = {ei: (topo.edge_params[ei], pts) for ei, pts in points.items()}
+        standing = [ei for ei in points if ei in bent and ei not in straight and ei not in same
                     and not _stands_anyway(bent[ei], points[ei], target)]
-        bends = dict(zip(standing, bend_sizes_many(
+        bends = {ei: b for ei, b in bends.items() if ei in same} | dict(zip(standing, bend_sizes_many(
             [(cap[ei][1], topo.edge_params[ei], points[ei], bent[ei]) for ei in standing], target), strict=True))
         at_vertex: dict[int, float] = {}
         for ei, pts in points.items():
