@@ -133,28 +133,33 @@ def test_basis_functions_match_the_recursive_definition(degree):
     assert np.allclose(got.sum(axis=1), 1.0, atol=1e-12)
 
 
-def test_edge_curves_and_pcurves_in_bulk_match_occt_point_by_point():
-    """curve_values' closed forms (lines, circles) and its fallback give OCCT's own Value on every edge and pcurve."""
+@pytest.mark.parametrize("name", ["nist_ctc02_ap242.stp", "nist_ctc02_bspline_ap203.stp"])
+def test_edge_curves_and_pcurves_in_bulk_match_occt_point_by_point(name):
+    """curve_values' closed forms (lines, circles), its B-spline sums and its fallback give OCCT's own Value on every
+    edge and pcurve of CTC-02 (lines, circles, B-splines) and of its twin (all B-splines)."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve
     from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
-    from OCP.GeomAbs import GeomAbs_Circle, GeomAbs_Line
+    from OCP.GeomAbs import GeomAbs_BSplineCurve
     from OCP.TopAbs import TopAbs_EDGE
     from OCP.TopoDS import TopoDS
 
     from amprep.geometry.cad.occt_arrays import curve_values
     from amprep.geometry.cad.topology import explore
 
-    model = read_cad(corpus("nist_ctc02_ap242.stp"), "step")  # lines, circles, B-splines
-    kinds = set()
-    for face in model.faces:
+    model = read_cad(corpus(name), "step")
+    kinds, splines = set(), 0
+    for face in model.faces[::3]:
         for edge in explore(face, TopAbs_EDGE, TopoDS.Edge_s):
-            t = np.linspace(*BRep_Tool.Range_s(edge), 7)
             pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
             for curve, raw in ((BRepAdaptor_Curve(edge), None), (Geom2dAdaptor_Curve(pcurve), pcurve)):
-                expected = np.array([(raw if raw is not None else curve).Value(float(x)).Coord() for x in t])
-                got = curve_values(curve, t)
-                assert got.shape == expected.shape
-                assert np.allclose(got, expected, rtol=0, atol=1e-9 * (1 + np.abs(expected).max()))
+                spline = curve.GetType() == GeomAbs_BSplineCurve
+                for n in (7, 4 * curve.NbPoles() + 1) if spline else (7,):  # the sums run from twice the poles
+                    t = np.linspace(*BRep_Tool.Range_s(edge), n)
+                    expected = np.array([(raw if raw is not None else curve).Value(float(x)).Coord() for x in t])
+                    got = curve_values(curve, t)
+                    assert got.shape == expected.shape
+                    assert np.allclose(got, expected, rtol=0, atol=1e-9 * (1 + np.abs(expected).max()))
                 kinds.add(curve.GetType())
-    assert {GeomAbs_Line, GeomAbs_Circle} <= kinds and len(kinds) > 2  # both closed forms and the fallback ran
+                splines += spline
+    assert (len(kinds) > 2) if "ap242" in name else splines > 100

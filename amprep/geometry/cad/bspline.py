@@ -38,6 +38,15 @@ def basis_functions(knots: np.ndarray, degree: int, t: np.ndarray, span: np.ndar
     return basis
 
 
+def eval_curve(poles: np.ndarray, weights: np.ndarray, knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
+    """(N, d) C(t) = Σ N_i(t) w_i P_i / Σ N_i(t) w_i of a (rational) B-spline curve: poles (n, d), weights (n,), flat
+    knots (n + degree + 1,), at t (N,)."""
+    span = find_span(knots, degree, t)
+    idx = (span - degree)[:, None] + np.arange(degree + 1)
+    w = basis_functions(knots, degree, t, span) * weights[idx]
+    return np.einsum("ij,ijk->ik", w, poles[idx]) / w.sum(axis=1, keepdims=True)
+
+
 #: a call of this many points runs the compiled kernel unless the enclosing computation chose (core/compiled.py)
 COMPILED_MIN_POINTS = 100_000
 _kernel = None  # (parallel kernel, serial kernel, points per parallel block) once loaded

@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import numpy as np
-from OCP.GeomAbs import GeomAbs_Circle, GeomAbs_Line
+from OCP.GeomAbs import GeomAbs_BSplineCurve, GeomAbs_Circle, GeomAbs_Line
+
+from amprep.geometry.cad.bspline import eval_curve
 
 
 def vec(p) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -31,8 +33,9 @@ _CLOSED_FORM_RTOL = 1e-9
 
 def curve_values(curve, t: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
     """(n, d) the points at params t (n,) of a curve adaptor (BRepAdaptor_Curve: d = 3; Geom2dAdaptor_Curve: d = 2):
-    a line (L + t D) or circle (C + R (cos t X + sin t Y)) in closed form, checked against the adaptor's own Value at
-    the first and last param; any other curve point by point."""
+    a line (L + t D) or circle (C + R (cos t X + sin t Y)) in closed form, a non-periodic B-spline asked at twice its
+    poles or more by bspline.eval_curve, each checked against the adaptor's own Value at the first and last param;
+    any other curve point by point."""
     t = np.asarray(t, float).ravel()
     kind = curve.GetType()
     out = None
@@ -43,6 +46,12 @@ def curve_values(curve, t: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped
         circle = curve.Circle()
         centre, x, y = _xy(circle.Location()), _xy(circle.XAxis().Direction()), _xy(circle.YAxis().Direction())
         out = centre + circle.Radius() * (np.cos(t)[:, None] * x + np.sin(t)[:, None] * y)
+    elif kind == GeomAbs_BSplineCurve and len(t) >= 2 * curve.NbPoles() and not curve.IsPeriodic():
+        spline = curve.BSpline()  # a BRepAdaptor_Curve's is a copy placed by the edge's location
+        n = spline.NbPoles()
+        poles = np.array([_xy(spline.Pole(i)) for i in range(1, n + 1)])
+        weights = np.array([spline.Weight(i) for i in range(1, n + 1)]) if spline.IsRational() else np.ones(n)
+        out = eval_curve(poles, weights, array1(spline.KnotSequence()), spline.Degree(), t)
     if out is not None:
         ends = np.array([_xy(curve.Value(float(t[0]))), _xy(curve.Value(float(t[-1])))])
         if np.all(np.abs(out[[0, -1]] - ends) <= _CLOSED_FORM_RTOL * (1 + np.abs(ends))):
