@@ -27,7 +27,8 @@ def array1(arr) -> np.ndarray:  # type: ignore[no-untyped-def]
     return np.array([arr.Value(i) for i in range(arr.Lower(), arr.Upper() + 1)], dtype=float)
 
 
-#: a closed-form line or circle must give OCCT's own points at its ends to this × (1 + |point|), else it is not used
+#: a line, circle or B-spline summed here must give OCCT's own points at its ends to this × (1 + |point|), else it is
+#: asked of OCCT point by point
 _CLOSED_FORM_RTOL = 1e-9
 
 

@@ -102,7 +102,6 @@ class Topology:
                                        BRep_Tool.Parameter_s(v2, e), bool(BRep_Tool.Degenerated_s(e)))
         return known
 
-
     def face_area(self, face: TopoDS_Face) -> float:
         """|∫∫ dA| of a face (OCCT's surface integral), asked of OCCT once per face (a cache on the topology)."""
         known = self._areas.get(face)
