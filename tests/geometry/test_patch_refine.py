@@ -277,3 +277,19 @@ def test_a_quality_face_its_refinement_cannot_bring_within_is_meshed_by_the_defa
     c = check_mesh(r.mesh)
     assert c.closed and c.degenerate_triangles == 0 and manifold3d_accepts(r.mesh)
     assert r.max_error <= tol
+
+
+def test_the_flips_side_table_updated_in_place_equals_one_built_afresh():
+    """flip_for_angles keeps its side table across passes, rewriting only the flipped triangles' rows
+    (local_refine._repacked); after any rewrites it must equal the table sorted afresh, so the flips are the same."""
+    from amprep.geometry.meshing.local_refine import _packed_sides, _pairs, _repacked, _shared_sides
+
+    rng = np.random.default_rng(7)
+    tris = rng.integers(0, 400, (3000, 3))
+    packed = _packed_sides(tris, 400)
+    for _ in range(25):
+        changed = np.unique(rng.integers(0, len(tris), 60))
+        tris[changed] = rng.integers(0, 400, (len(changed), 3))
+        packed = _repacked(packed, tris, changed, 400)
+        assert np.array_equal(packed, _packed_sides(tris, 400))
+        assert all(np.array_equal(a, b) for a, b in zip(_pairs(packed, 3 * len(tris)), _shared_sides(tris, 400)))

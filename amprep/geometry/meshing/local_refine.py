@@ -220,17 +220,43 @@ def _unit_normals(corners: np.ndarray) -> np.ndarray:
 
 def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t1, k1, t2, k2): triangle t1's side k1 (corners k1, k1+1) is triangle t2's side k2, for every shared side."""
-    code = edge_codes(tris, n).ravel()  # row t·3 + k: side k of triangle t
-    m = len(code)
-    if m and n * n * m < 2**62:  # code and row in one int64: a plain sort, the stable argsort's order
-        packed = np.sort(code * m + np.arange(m))
-        order, ordered = packed % m, packed // m
-    else:
-        order = np.argsort(code, kind="stable")
-        ordered = code[order]
+    packed = _packed_sides(tris, n)
+    if packed is not None:
+        return _pairs(packed, 3 * len(tris))
+    code = edge_codes(tris, n).ravel()
+    order = np.argsort(code, kind="stable")
+    pair = np.flatnonzero(code[order][1:] == code[order][:-1])
+    first, second = order[pair], order[pair + 1]
+    return first // 3, first % 3, second // 3, second % 3
+
+
+def _packed_sides(tris: np.ndarray, n: int) -> np.ndarray | None:
+    """(3t,) sorted code·3t + row of every side (row t·3 + k: side k of triangle t; code edge_codes'): the side table
+    in one int64 sort; None where code·3t would overflow."""
+    m = 3 * len(tris)
+    if not m or n * n * m >= 2**62:
+        return None
+    return np.sort(edge_codes(tris, n).ravel() * m + np.arange(m))
+
+
+def _pairs(packed: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """_shared_sides' (t1, k1, t2, k2) from _packed_sides' array (m = 3t): consecutive rows of one code, in that order."""
+    order, ordered = packed % m, packed // m
     pair = np.flatnonzero(ordered[1:] == ordered[:-1])
     first, second = order[pair], order[pair + 1]
     return first // 3, first % 3, second // 3, second % 3
+
+
+def _repacked(packed: np.ndarray, tris: np.ndarray, changed: np.ndarray, n: int) -> np.ndarray:
+    """_packed_sides of `tris` from the array of before `changed` (k,) triangles were rewritten: their rows' old entries
+    dropped and their new ones merged in, in linear passes (no sort of the whole)."""
+    m = 3 * len(tris)
+    rows = (3 * changed[:, None] + np.arange(3)).ravel()
+    stale = np.zeros(m, bool)
+    stale[rows] = True
+    kept = packed[~stale[packed % m]]
+    fresh = np.sort(edge_codes(tris[changed], n).ravel() * m + rows)
+    return np.insert(kept, np.searchsorted(kept, fresh), fresh)
 
 
 def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6,
@@ -247,8 +273,9 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
     sign = 1.0 if _signed_area2(uv, tris).sum() >= 0 else -1.0
     angle = min_angles(xyz[tris])
     active = np.ones(len(tris), bool)  # a pair of triangles neither of which changed has nothing new to offer
+    packed = _packed_sides(tris, len(xyz))
     for _ in range(FLIP_PASSES):
-        t1, k1, t2, k2 = _shared_sides(tris, len(xyz))
+        t1, k1, t2, k2 = _shared_sides(tris, len(xyz)) if packed is None else _pairs(packed, 3 * len(tris))
         look = active[t1] | active[t2]
         t1, k1, t2, k2 = t1[look], k1[look], t2[look], k2[look]
         a, b, c = tris[t1, k1], tris[t1, (k1 + 1) % 3], tris[t1, (k1 + 2) % 3]
@@ -277,6 +304,8 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
             break
         p = pick[keep]
         tris[t1[p]], tris[t2[p]] = new1[p], new2[p]
+        if packed is not None:
+            packed = _repacked(packed, tris, np.concatenate([t1[p], t2[p]]), len(xyz))
         err[t1[p]], err[t2[p]] = e[:len(pick)][keep], e[len(pick):][keep]
         angle[t1[p]], angle[t2[p]] = angle1[p], angle2[p]
         active[:] = False
