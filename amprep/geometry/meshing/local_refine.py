@@ -393,6 +393,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
     corner_order = np.argsort(tris.ravel(), kind="stable")  # each node's triangles, node by node
     first = np.searchsorted(tris.ravel()[corner_order], np.arange(n + 1))
     trial_uv, trial_xyz = uv.copy(), xyz.copy()  # the state with this set's movers moved; equal to it between sets
+    held = np.zeros(len(tris), bool)
     for _ in range(SMOOTH_ROUNDS):
         before = angle.mean()
         candidates = free.copy()
@@ -404,7 +405,9 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
             idx = np.flatnonzero(movers)
             trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, ring, patch.uv)
             trial_xyz[idx] = surface.evaluate(trial_uv[idx])
-            star = np.unique(corner_order[_ranges(first[idx], first[idx + 1])] // 3)  # triangles holding a mover
+            held[corner_order[_ranges(first[idx], first[idx + 1])] // 3] = True  # triangles holding a mover
+            star = np.flatnonzero(held)  # sorted, each once: np.unique's, without its hash of every corner
+            held[star] = False
             t = tris[star]
             owner = t[np.arange(len(t)), movers[t].argmax(axis=1)]  # the one moving node of each
             new_angle = min_angles(trial_xyz[t])
