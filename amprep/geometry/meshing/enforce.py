@@ -272,9 +272,9 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
     before = dict(f.topo.edge_params)
     faces = [f.model.faces[i] for i in remesh]
     collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
-    bare_straight_edges(faces, f.topo, lambda ei: _lines_stay_lines(f, ei))
+    bare_straight_edges(faces, f.topo, lambda ei: _faces_all(f, ei, LINES_STAY_LINES))
     grade_edges(faces, [f.surfaces[i] for i in remesh], f.topo, f.tol, target)  # type: ignore[misc]
-    stagger_strips(faces, [f.surfaces[i] for i in remesh], f.topo, lambda ei: _all_planes(f, ei))  # type: ignore[misc]
+    stagger_strips(faces, [f.surfaces[i] for i in remesh], f.topo, lambda ei: _faces_all(f, ei, ("plane",)))  # type: ignore[misc]
     loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
     planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]
                             target, f.params.angular, f.params.max_triangles)
@@ -292,15 +292,10 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
     return loops, planned
 
 
-def _all_planes(f: FaceStates, edge_index: int) -> bool:
-    """True when every face the edge bounds is a plane."""
-    return all(f.surfaces[i] is not None and f.surfaces[i].surface_type == "plane"  # type: ignore[union-attr]
-               for i in _faces_of_edge(f.model, f.topo, edge_index))
-
-
-def _lines_stay_lines(f: FaceStates, edge_index: int) -> bool:
-    """True when every face the edge bounds (in `remesh` or not) keeps lines straight in its (u,v)."""
-    return all(f.surfaces[i] is not None and f.surfaces[i].surface_type in LINES_STAY_LINES  # type: ignore[union-attr]
+def _faces_all(f: FaceStates, edge_index: int, kinds: tuple[str, ...]) -> bool:
+    """True when every face the edge bounds (in `remesh` or not) has a surface of one of `kinds`: LINES_STAY_LINES,
+    those that keep lines straight in their (u,v); ("plane",), those no lattice's rows stand on."""
+    return all(f.surfaces[i] is not None and f.surfaces[i].surface_type in kinds  # type: ignore[union-attr]
                for i in _faces_of_edge(f.model, f.topo, edge_index))
 
 

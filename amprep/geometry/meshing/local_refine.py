@@ -225,9 +225,7 @@ def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.
         return _pairs(packed, 3 * len(tris))
     code = edge_codes(tris, n).ravel()
     order = np.argsort(code, kind="stable")
-    pair = np.flatnonzero(code[order][1:] == code[order][:-1])
-    first, second = order[pair], order[pair + 1]
-    return first // 3, first % 3, second // 3, second % 3
+    return _consecutive(order, code[order])
 
 
 def _packed_sides(tris: np.ndarray, n: int) -> np.ndarray | None:
@@ -240,8 +238,12 @@ def _packed_sides(tris: np.ndarray, n: int) -> np.ndarray | None:
 
 
 def _pairs(packed: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """_shared_sides' (t1, k1, t2, k2) from _packed_sides' array (m = 3t): consecutive rows of one code, in that order."""
-    order, ordered = packed % m, packed // m
+    """_shared_sides' (t1, k1, t2, k2) from _packed_sides' array (m = 3t)."""
+    return _consecutive(packed % m, packed // m)
+
+
+def _consecutive(order: np.ndarray, ordered: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t1, k1, t2, k2) of consecutive rows `order` (3t,) whose codes `ordered` (3t,), sorted, are equal."""
     pair = np.flatnonzero(ordered[1:] == ordered[:-1])
     first, second = order[pair], order[pair + 1]
     return first // 3, first % 3, second // 3, second % 3

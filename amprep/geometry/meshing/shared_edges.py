@@ -326,23 +326,22 @@ def stagger_strips(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topo
     edge by edge so that each has one edge moved where the chain allows; only `movable` edges are moved (every face
     they bound a plane: no lattice's rows stand on them)."""
     links: list[tuple[int, int]] = []
-    edges: dict[int, TopoDS_Edge] = {}
+    fractions: dict[int, np.ndarray] = {}
     for face, surface in zip(faces, surfaces, strict=True):
         strip = _strip(face, surface, topo)
         if strip is not None:
             links.append((strip[0], strip[1]))
-            edges.update(strip[2])
+            fractions.update(strip[2])
     colour = _two_colours(links, movable)
     for ei in sorted(e for e, c in colour.items() if c == 1 and movable(e)):
-        params = topo.edge_params[ei]
-        f = _fractions(edges[ei], params)
+        params, f = topo.edge_params[ei], fractions[ei]
         topo.edge_params[ei] = np.concatenate([params[:1], np.interp((f[:-1] + f[1:]) / 2, f, params), params[-1:]])
 
 
-def _strip(face: TopoDS_Face, surface: Surface, topo: Topology) -> tuple[int, int, dict[int, TopoDS_Edge]] | None:
-    """(long edge, the other, the face's edges by index) of a plane strip: one wire of four straight edges, the two
-    short ones shorter than the longest segment of the two long ones, which are cut (into 3 or more) at the same
-    fractions of their lengths (STRIP_MATCH); None for any other face."""
+def _strip(face: TopoDS_Face, surface: Surface, topo: Topology) -> tuple[int, int, dict[int, np.ndarray]] | None:
+    """(long edge, the other, each one's points' fractions of its length (n,)) of a plane strip: one wire of four
+    straight edges, the two short ones shorter than the longest segment of the two long ones, which are cut (into 3
+    or more) at the same fractions of their lengths (STRIP_MATCH); None for any other face."""
     if surface.surface_type != "plane" or len(explore(face, TopAbs_WIRE, TopoDS.Wire_s)) != 1:
         return None
     sides = {topo.edge_index(e): e for e in face_edges(face) if not BRep_Tool.Degenerated_s(e)}
@@ -352,20 +351,18 @@ def _strip(face: TopoDS_Face, surface: Surface, topo: Topology) -> tuple[int, in
     pairs = [(a, b) for a in sides for b in sides if a < b and not set(ends[a]) & set(ends[b])]
     if len(pairs) != 2 or any(len(set(v)) != 2 for v in ends.values()):
         return None
-    length = {ei: edge_length(e, topo.edge_params[ei]) for ei, e in sides.items()}
-    (a, c), short = sorted(pairs, key=lambda pair: -min(length[ei] for ei in pair))
-    longest = max(float(np.linalg.norm(np.diff(edge_points(sides[ei], topo.edge_params[ei]), axis=0), axis=1).max())
-                  for ei in (a, c))
-    if (max(length[ei] for ei in short) >= longest  # wider than a segment: interior points, not a strip
-            or min(len(topo.edge_params[ei]) for ei in (a, c)) < 4
+    chords = {ei: np.linalg.norm(np.diff(edge_points(e, topo.edge_params[ei]), axis=0), axis=1)
+              for ei, e in sides.items()}
+    (a, c), short = sorted(pairs, key=lambda pair: -min(chords[ei].sum() for ei in pair))
+    if (max(chords[ei].sum() for ei in short) >= max(chords[a].max(), chords[c].max())  # wider than a segment: not a strip
+            or min(len(chords[a]), len(chords[c])) < 3
             or not all(_straight(e, topo.edge_params[ei]) for ei, e in sides.items())):
         return None
     ahead = any({ends[a][0], ends[c][0]} == set(ends[ei]) for ei in short)  # c runs from a's start's side too
-    fa, fc = _fractions(sides[a], topo.edge_params[a]), _fractions(sides[c], topo.edge_params[c])
-    fc = fc if ahead else 1.0 - fc[::-1]
-    if len(fa) != len(fc) or np.abs(fa - fc).max() > STRIP_MATCH * np.diff(fa).min():
+    fa, fc = (along / along[-1] for along in (np.concatenate([[0.0], np.cumsum(chords[ei])]) for ei in (a, c)))
+    if len(fa) != len(fc) or np.abs(fa - (fc if ahead else 1.0 - fc[::-1])).max() > STRIP_MATCH * np.diff(fa).min():
         return None
-    return a, c, sides
+    return a, c, {a: fa, c: fc}
 
 
 def _two_colours(links: list[tuple[int, int]], movable: Callable[[int], bool]) -> dict[int, int]:
@@ -393,12 +390,6 @@ def _ends_by_param(topo: Topology, edge: TopoDS_Edge) -> tuple[int, int]:
     """(vertex at the edge's smaller parameter, vertex at its larger), after collapses (Topology.root)."""
     v1, p1, v2, p2 = topo.edge_ends(edge)
     return (topo.root(v1), topo.root(v2)) if p1 <= p2 else (topo.root(v2), topo.root(v1))
-
-
-def _fractions(edge: TopoDS_Edge, params: np.ndarray) -> np.ndarray:
-    """(n,) the cumulative chord length of an edge's points at params (n,), over its total: 0 … 1."""
-    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(edge_points(edge, params), axis=0), axis=1))])
-    return along / along[-1]
 
 
 def _stands_anyway(faces: list[tuple[TopoDS_Face, Surface]], points: np.ndarray, target: float) -> bool:
