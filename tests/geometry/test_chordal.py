@@ -74,6 +74,32 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
                      else {"plane", "cylinder", "bspline"})
 
 
+@pytest.mark.parametrize("kind", ["sphere", "torus", "cone"])
+def test_the_compiled_kernels_turn_tables_keep_large_triangles_exact(kind):
+    """The compiled closed-form kernel takes a sample's sin and cos from products of three per triangle
+    (_chordal_kernel._turns); on triangles up to 6 rad across in u and v, at orders 4, 6 and 12, and with corners off
+    the surface, it gives the numpy path's direct sin and cos to rounding."""
+    import cadquery as cq
+
+    from amprep.geometry.cad.surfaces import surface_of
+    from amprep.geometry.measure import chordal
+
+    solid = {"sphere": lambda: cq.Solid.makeSphere(12), "torus": lambda: cq.Solid.makeTorus(20, 5),
+             "cone": lambda: cq.Solid.makeCone(8, 3, 10)}[kind]()
+    surf = next(s for s in map(surface_of, (f.wrapped for f in solid.Faces())) if s.surface_type == kind)
+    rng = np.random.default_rng(7)
+    uv = rng.uniform(-3, 3, (3000, 3, 2)) + rng.uniform(-20, 20, (3000, 1, 2))
+    corners = surf.evaluate(uv.reshape(-1, 2)).reshape(-1, 3, 3) + rng.normal(0, 0.01, (3000, 3, 3))
+    chordal.load_kernels()
+    for order in (4, 6, 12):
+        with compiled(True):
+            fast = chordal._compiled(surf, corners, uv, barycentric_grid(order))
+        with compiled(False):
+            slow = triangle_chordal_error(corners, uv, surf.evaluate, order)
+        assert fast is not None
+        np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.parametrize("name, tol", [("nist_ctc02_ap242.stp", 0.1), ("nist_ctc02_bspline_ap203.stp", 0.05)])
 def test_a_stop_value_bounds_only_triangles_over_it_and_serial_kernels_equal_parallel(name, tol):
     """Every curved face of a real part, measured in one call (the parallel kernels, over BLOCK triangles) and in

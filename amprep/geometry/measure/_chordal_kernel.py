@@ -5,31 +5,7 @@ import numpy as np
 from numba import njit, prange
 
 from amprep.geometry.cad._bspline_kernel import point_kernel, scratch
-from amprep.geometry.cad.surfaces import CONE, CYLINDER, PLANE, SPHERE
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _analytic(kind, prm, u, v):
-    """S(u,v) of a closed-form surface; prm = O(3), X(3), Y(3), Z(3), a, b (radius / semi-angle / radii)."""
-    if kind == PLANE:
-        c0, c1, c2 = u, v, 0.0
-    else:
-        cu, su = np.cos(u), np.sin(u)
-        if kind == CYLINDER:
-            c0, c1, c2 = prm[12] * cu, prm[12] * su, v
-        elif kind == CONE:
-            rad = prm[12] + v * np.sin(prm[13])
-            c0, c1, c2 = rad * cu, rad * su, v * np.cos(prm[13])
-        elif kind == SPHERE:
-            rc = prm[12] * np.cos(v)
-            c0, c1, c2 = rc * cu, rc * su, prm[12] * np.sin(v)
-        else:  # TORUS
-            rad = prm[12] + prm[13] * np.cos(v)
-            c0, c1, c2 = rad * cu, rad * su, prm[13] * np.sin(v)
-    x = prm[0] + c0 * prm[3] + c1 * prm[6] + c2 * prm[9]
-    y = prm[1] + c0 * prm[4] + c1 * prm[7] + c2 * prm[10]
-    z = prm[2] + c0 * prm[5] + c1 * prm[8] + c2 * prm[11]
-    return x, y, z
+from amprep.geometry.cad.surfaces import CONE, CYLINDER, PLANE, SPHERE, TORUS
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -62,33 +38,86 @@ def _distance(c, nx, ny, nz, xyz):
 BLOCK = 1024
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _turns(a, m, k, cos_t, sin_t):
+    """cos_t[i, j], sin_t[i, j] ← cos, sin of a_2 + i(a_0 − a_2)/k + j(a_1 − a_2)/k (i + j ≤ k), the angle at the
+    order-k grid's point (i, j)/k of triangle m (a (M, 3): its corners' angles): e^{i a_2} times powers of the two
+    steps' turns, three sin/cos pairs per triangle instead of one per point."""
+    c0, s0 = np.cos(a[m, 2]), np.sin(a[m, 2])
+    ca, sa = np.cos((a[m, 0] - a[m, 2]) / k), np.sin((a[m, 0] - a[m, 2]) / k)
+    cb, sb = np.cos((a[m, 1] - a[m, 2]) / k), np.sin((a[m, 1] - a[m, 2]) / k)
+    ci, si = c0, s0  # e^{i(a_2 + i·step_a)}, row by row
+    for i in range(k + 1):
+        cj, sj = ci, si
+        for j in range(k + 1 - i):
+            cos_t[i, j], sin_t[i, j] = cj, sj
+            cj, sj = cj * cb - sj * sb, cj * sb + sj * cb
+        ci, si = ci * ca - si * sa, ci * sa + si * ca
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _revolved(kind, prm, u, v, cu, su, cv, sv):
+    """S(u,v) of a closed-form surface given cos u, sin u, cos v, sin v; prm = O(3), X(3), Y(3), Z(3), a, b (radius /
+    semi-angle / radii)."""
+    if kind == PLANE:
+        c0, c1, c2 = u, v, 0.0
+    elif kind == CYLINDER:
+        c0, c1, c2 = prm[12] * cu, prm[12] * su, v
+    elif kind == CONE:
+        rad = prm[12] + v * np.sin(prm[13])
+        c0, c1, c2 = rad * cu, rad * su, v * np.cos(prm[13])
+    elif kind == SPHERE:
+        rc = prm[12] * cv
+        c0, c1, c2 = rc * cu, rc * su, prm[12] * sv
+    else:  # TORUS
+        rad = prm[12] + prm[13] * cv
+        c0, c1, c2 = rad * cu, rad * su, prm[13] * sv
+    x = prm[0] + c0 * prm[3] + c1 * prm[6] + c2 * prm[9]
+    y = prm[1] + c0 * prm[4] + c1 * prm[7] + c2 * prm[10]
+    z = prm[2] + c0 * prm[5] + c1 * prm[8] + c2 * prm[11]
+    return x, y, z
+
+
 @njit(cache=True, nogil=True)
-def _analytic_one(kind, prm, corners, uv, w, stop, m):
-    c = corners[m]
-    nx, ny, nz, ok = _unit_normal(c)
-    best = 0.0
-    if ok:
-        for p in range(w.shape[0]):
-            u, v = _sample(w, uv, m, p)
-            best = max(best, _distance(c, nx, ny, nz, _analytic(kind, prm, u, v)))
-            if best > stop:
-                break
-    return best
+def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, start, end):
+    """out[start:end] of analytic_chordal_kernel; a revolved surface's sin and cos from _turns' tables."""
+    cu, su, cv, sv = np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1))
+    turn_u = kind != PLANE
+    turn_v = kind == SPHERE or kind == TORUS
+    au, av = uv[:, :, 0], uv[:, :, 1]
+    for m in range(start, end):
+        c = corners[m]
+        nx, ny, nz, ok = _unit_normal(c)
+        best = 0.0
+        if ok:
+            if turn_u:
+                _turns(au, m, k, cu, su)
+            if turn_v:
+                _turns(av, m, k, cv, sv)
+            for p in range(w.shape[0]):
+                u, v = _sample(w, uv, m, p)
+                i, j = ij[p, 0], ij[p, 1]
+                xyz = _revolved(kind, prm, u, v, cu[i, j], su[i, j], cv[i, j], sv[i, j])
+                best = max(best, _distance(c, nx, ny, nz, xyz))
+                if best > stop:
+                    break
+        out[m] = best
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def analytic_chordal_kernel(kind, prm, corners, uv, w, stop, out):
-    """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m|; corners (M,3,3), uv (M,3,2), w (P,3); a
-    triangle's points stop at the first over `stop` (out[m] is then a value > stop, not the maximum)."""
-    for m in prange(corners.shape[0]):
-        out[m] = _analytic_one(kind, prm, corners, uv, w, stop, m)
+def analytic_chordal_kernel(kind, prm, corners, uv, w, ij, k, stop, out):
+    """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m|; corners (M,3,3), uv (M,3,2), w (P,3) the order-k
+    grid, ij (P, 2) its points' (i, j) = k·w[:, :2]; a triangle's points stop at the first over `stop` (out[m] is then a
+    value > stop, not the maximum)."""
+    n = corners.shape[0]
+    for blk in prange((n + BLOCK - 1) // BLOCK):
+        _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, blk * BLOCK, min(n, (blk + 1) * BLOCK))
 
 
 @njit(cache=True, nogil=True)
-def analytic_chordal_serial(kind, prm, corners, uv, w, stop, out):
+def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, out):
     """analytic_chordal_kernel on the calling thread only."""
-    for m in range(corners.shape[0]):
-        out[m] = _analytic_one(kind, prm, corners, uv, w, stop, m)
+    _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, 0, corners.shape[0])
 
 
 @njit(cache=True, nogil=True)

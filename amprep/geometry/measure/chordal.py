@@ -103,6 +103,13 @@ def barycentric_grid(order: int) -> np.ndarray:
 
 
 @lru_cache(maxsize=32)
+def _grid_order(points: int) -> int:
+    """k of the order-k barycentric grid with `points` = (k+1)(k+2)/2 points."""
+    k = int(round((np.sqrt(8 * points + 1) - 3) / 2))
+    assert (k + 1) * (k + 2) // 2 == points, points
+    return k
+
+
 def _interior_first(order: int) -> np.ndarray:
     """The order-k grid's points, those farthest from the triangle's sides first (where a curved surface leaves the
     triangle's plane most): a triangle over a stop value is found with few points."""
@@ -163,7 +170,9 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
     serial = len(corners) <= _kernels.BLOCK
     if kind is not None:
         fn = _kernels.analytic_chordal_serial if serial else _kernels.analytic_chordal_kernel
-        fn(kind[0], kind[1], corners, uv, w, float(stop), out)
+        k = _grid_order(len(w))
+        ij = np.ascontiguousarray(np.rint(w[:, :2] * k), dtype=np.int64)
+        fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), out)
         return
     assert d is not None
     if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
