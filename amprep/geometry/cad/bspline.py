@@ -104,8 +104,9 @@ def homogeneous_poles(poles: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 def eval_homogeneous(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, udeg: int, vdeg: int,
-                     uv: np.ndarray) -> np.ndarray:
-    """eval_surface from homogeneous_poles and contiguous float64 knots, made once per surface.
+                     uv: np.ndarray, cache: dict | None = None) -> np.ndarray:  # type: ignore[type-arg]
+    """eval_surface from homogeneous_poles and contiguous float64 knots, made once per surface (`cache`: where the
+    kernel's span polynomials are kept, kernel_bases).
 
     The numba kernel of _bspline_kernel.py runs where core.compiled.use_compiled says (the computation's choice, or
     calls of ≥ COMPILED_MIN_POINTS points), numpy otherwise, so a small part never pays numba's ~0.7 s start-up and
@@ -119,6 +120,21 @@ def eval_homogeneous(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, ude
     out = np.empty((len(uv), 3))
     parallel, serial, block = _kernel
     run = serial if len(uv) <= block else parallel
-    run(pw, uknots, vknots, int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
+    ub, vb = kernel_bases(cache if cache is not None else {}, uknots, int(udeg), vknots, int(vdeg), pw.shape[:2])
+    run(pw, ub, vb, int(udeg), int(vdeg), np.ascontiguousarray(uv, dtype=np.float64), out)
     return out
 
+
+def kernel_bases(cache: dict, uknots: np.ndarray, udeg: int, vknots: np.ndarray, vdeg: int,  # type: ignore[type-arg]
+                 n_poles: tuple[int, int]) -> tuple[tuple, tuple]:  # type: ignore[type-arg]
+    """((knots, coef, inv_h) in u, the same in v): each direction's knots and the Bernstein form of its basis on each
+    span (_bspline_kernel.span_bernstein), made once into `cache` (a surface's data dict) under "_bases"."""
+    if "_bases" not in cache:
+        from amprep.geometry.cad._bspline_kernel import span_bernstein
+
+        out = []
+        for knots, deg, n in ((uknots, udeg, n_poles[0]), (vknots, vdeg, n_poles[1])):
+            knots = np.ascontiguousarray(knots, dtype=np.float64)
+            out.append((knots, *span_bernstein(knots, deg, n)))
+        cache["_bases"] = tuple(out)
+    return cache["_bases"]

@@ -263,7 +263,7 @@ def _surface(ad: BRepAdaptor_Surface) -> Surface:
         pw = homogeneous_poles(d["poles"], d["weights"])
         uk, vk = (np.ascontiguousarray(d[k], dtype=np.float64) for k in ("uknots", "vknots"))
         return Surface(name, lambda uv: eval_homogeneous(pw, uk, vk, d["udeg"], d["vdeg"],
-                                                         wrap_periodic(uv, d["uperiod"], d["vperiod"])), data=d)
+                                                         wrap_periodic(uv, d["uperiod"], d["vperiod"]), d), data=d)
     if kind in (GeomAbs_SurfaceOfRevolution, GeomAbs_SurfaceOfExtrusion):
         swept = _swept(ad, kind)
         if swept is not None:

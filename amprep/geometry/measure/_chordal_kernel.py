@@ -121,8 +121,9 @@ def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, out):
 
 
 @njit(cache=True, nogil=True)
-def _bspline_range(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out, start, end):
-    bu, bv, left, right = scratch(udeg, vdeg)
+def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, start, end):
+    work = scratch(udeg, vdeg)
+    su = sv = -1
     for m in range(start, end):
         c = corners[m]
         nx, ny, nz, ok = _unit_normal(c)
@@ -134,24 +135,25 @@ def _bspline_range(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, s
                     u = uper[0] + (u - uper[0]) % (uper[1] - uper[0])
                 if vper[1] > vper[0]:
                     v = vper[0] + (v - vper[0]) % (vper[1] - vper[0])
-                xyz = point_kernel(pw, uknots, vknots, udeg, vdeg, u, v, bu, bv, left, right)
-                best = max(best, _distance(c, nx, ny, nz, xyz))
+                x, y, z, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, u, v, work, su, sv)
+                best = max(best, _distance(c, nx, ny, nz, (x, y, z)))
                 if best > stop:
                     break
         out[m] = best
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def bspline_chordal_kernel(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
-    """The same for a rational B-spline (poles·weights | weights (nu, nv, 4)); a periodic direction's parameter is
-    wrapped into [uper[0], uper[1]) (uper[1] ≤ uper[0]: not periodic)."""
+def bspline_chordal_kernel(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
+    """The same for a rational B-spline (poles·weights | weights (nu, nv, 4); ub, vb: each direction's knots and span
+    polynomials, _bspline_kernel.point_kernel's); a periodic direction's parameter is wrapped into [uper[0], uper[1])
+    (uper[1] ≤ uper[0]: not periodic)."""
     n = corners.shape[0]
     for blk in prange((n + BLOCK - 1) // BLOCK):
-        _bspline_range(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out, blk * BLOCK,
+        _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, blk * BLOCK,
                        min(n, (blk + 1) * BLOCK))
 
 
 @njit(cache=True, nogil=True)
-def bspline_chordal_serial(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
+def bspline_chordal_serial(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
     """bspline_chordal_kernel on the calling thread only."""
-    _bspline_range(pw, uknots, vknots, udeg, vdeg, uper, vper, corners, uv, w, stop, out, 0, corners.shape[0])
+    _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, 0, corners.shape[0])

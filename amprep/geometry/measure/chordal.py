@@ -179,9 +179,10 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
         d["_pw"] = np.ascontiguousarray(np.concatenate([d["poles"] * d["weights"][..., None],
                                                         d["weights"][..., None]], axis=2))
     per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
+    ub, vb = _bspline.kernel_bases(d, d["uknots"], int(d["udeg"]), d["vknots"], int(d["vdeg"]), d["_pw"].shape[:2])
     fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
-    fn(d["_pw"], np.ascontiguousarray(d["uknots"], dtype=np.float64), np.ascontiguousarray(d["vknots"], dtype=np.float64),
-       int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w), float(stop), out)
+    fn(d["_pw"], ub, vb, int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w),
+       float(stop), out)
 
 
 def triangle_chordal_error(
