@@ -23,6 +23,11 @@ def norms(a: np.ndarray) -> np.ndarray:
     return np.sqrt(a[..., 0] * a[..., 0] + a[..., 1] * a[..., 1] + a[..., 2] * a[..., 2])
 
 
+def turn(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(k,) (b − a) × (c − a) of 2-D points a, b, c (k, 2): twice the signed area of the triangle (> 0: a left turn)."""
+    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+
 def triangle_normals(corners: np.ndarray) -> np.ndarray:
     """(m, 3) un-normalised normals (b − a) × (c − a) of (m, 3, 3) corners (length: twice the area)."""
     return cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])

@@ -260,7 +260,7 @@ def _param_of_v(face: TopoDS_Face, edge, rows: np.ndarray) -> np.ndarray | None:
 
 def _edge_v(face: TopoDS_Face, edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
     pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-    return np.sort([pc.Value(float(t)).Y() for t in params])
+    return np.sort(curve_values(Geom2dAdaptor_Curve(pc), params)[:, 1])
 
 
 def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list[list[dict]], topo: Topology,  # type: ignore[type-arg]
@@ -353,7 +353,7 @@ def _split_to_field(face: TopoDS_Face, edge, topo: Topology, field: Field, v: fl
     ei = topo.edge_index(edge)
     params = topo.edge_params[ei]
     pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-    u = np.array([pc.Value(float(t)).X() for t in params])
+    u = curve_values(Geom2dAdaptor_Curve(pc), params)[:, 0]
     density = np.interp((u[:-1] + u[1:]) / 2, field.us, field.per_u_at(np.array([v]))[0])
     parts = np.maximum(np.ceil(np.abs(np.diff(u)) * density - SPLIT_SLACK), 1).astype(np.int64)
     if (parts > 1).any():

@@ -14,7 +14,7 @@ from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.progress import within_budget
-from amprep.geometry.core.vectors import cross
+from amprep.geometry.core.vectors import cross, turn
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.measure.regularity import min_angles
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -37,8 +37,7 @@ AREA_RTOL = 1e-9
 
 def _signed_area2(pts: np.ndarray, tris: np.ndarray) -> np.ndarray:
     """(t,) twice the signed (u,v) area of each triangle (> 0: counter-clockwise)."""
-    a, b, c = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
-    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    return turn(pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]])
 
 
 def _retriangulate(pts: np.ndarray, region: np.ndarray, outside_seeds: np.ndarray,

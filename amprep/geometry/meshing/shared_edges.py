@@ -439,8 +439,9 @@ def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[
     for surface, pairs in by_face.values():
         median = _bounded_median_speeds(surface) if surface.bounds is not None else None
         uv = np.concatenate([uv for _, uv, _ in pairs])
+        ends = [(*np.sort(q[[0, -1], 0]), *np.sort(q[[0, -1], 1])) for _, q, _ in pairs]  # a box where none is known
         floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(
-            median if median is not None else _median_speeds(surface, q), q.shape) for _, q, _ in pairs])
+            median if median is not None else _median_speeds(surface, box), q.shape) for (_, q, _), box in zip(pairs, ends)])
         h = np.concatenate([np.full(len(q), difference_step(q)) for _, q, _ in pairs])  # each pair's own step
         speeds = np.stack(surface_speeds(surface, uv, uv, step=h), axis=1)
         step = np.minimum(STENCIL * target / np.maximum(np.maximum(speeds, floor), 1e-300), uv_extent(surface) / 8)
@@ -465,13 +466,12 @@ def _bounded_median_speeds(surface: Surface) -> np.ndarray:
     """_median_speeds over the bounds of a surface that has them, once per surface."""
     known = _MEDIANS.get(surface)
     if known is None:
-        known = _MEDIANS[surface] = _median_speeds(surface, np.zeros((2, 2)))
+        known = _MEDIANS[surface] = _median_speeds(surface, surface.bounds)  # type: ignore[arg-type]
     return known
 
 
-def _median_speeds(surface: Surface, uv: np.ndarray) -> np.ndarray:
-    """(2,) the median |S_u|, |S_v| over a SPEED_GRID² grid of the face's (u,v) bounds (of uv (n, 2) where unknown)."""
-    box = surface.bounds if surface.bounds is not None else (*np.sort(uv[[0, -1], 0]), *np.sort(uv[[0, -1], 1]))
+def _median_speeds(surface: Surface, box: tuple[float, float, float, float]) -> np.ndarray:
+    """(2,) the median |S_u|, |S_v| over a SPEED_GRID² grid of the (u,v) box (u0, u1, v0, v1)."""
     g = np.linspace(0.05, 0.95, SPEED_GRID)
     u, v = np.meshgrid(box[0] + g * (box[1] - box[0]), box[2] + g * (box[3] - box[2]))
     grid = np.stack([u.ravel(), v.ravel()], axis=1)

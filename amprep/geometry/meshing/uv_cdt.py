@@ -10,6 +10,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.wire_crossings import overlapping_boxes
+from amprep.geometry.core.vectors import turn
 
 MAX_ROUNDS = 40
 #: points are inserted no closer than this × tolerance (in metric-scaled (u,v) ≈ mm) to another
@@ -238,11 +239,6 @@ def inside_loops(points: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
     return crossings % 2 == 1
 
 
-def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(k,) sign of the turn a → b → c, each (k, 2)."""
-    return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-
-
 def crossing_segments(loops: list[np.ndarray]) -> np.ndarray:
     """(k, 2) pairs of indices of the loops' segments (node i to the next, each loop (n, 2) closed, the loops'
     segments taken in turn) that cross or touch with no end point shared: what makes a boundary polygon
@@ -254,6 +250,6 @@ def crossing_segments(loops: list[np.ndarray]) -> np.ndarray:
     i, j = pairs[:, 0], pairs[:, 1]
     shared = ((a[i] == a[j]).all(1) | (a[i] == b[j]).all(1) | (b[i] == a[j]).all(1) | (b[i] == b[j]).all(1))
     i, j = i[~shared], j[~shared]
-    hit = ((_orient(a[i], b[i], a[j]) * _orient(a[i], b[i], b[j]) <= 0)
-           & (_orient(a[j], b[j], a[i]) * _orient(a[j], b[j], b[i]) <= 0))
+    hit = ((np.sign(turn(a[i], b[i], a[j])) * np.sign(turn(a[i], b[i], b[j])) <= 0)
+           & (np.sign(turn(a[j], b[j], a[i])) * np.sign(turn(a[j], b[j], b[i])) <= 0))
     return np.sort(np.stack([i[hit], j[hit]], axis=1), axis=1)
