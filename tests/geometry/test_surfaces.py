@@ -187,3 +187,53 @@ def test_edge_curves_and_pcurves_in_bulk_match_occt_point_by_point(name):
                 kinds.add(curve.GetType())
                 splines += spline
     assert (len(kinds) > 2) if "ap242" in name else splines > 100
+
+
+class _CountingCurve:
+    """A curve adaptor that counts its Value calls (curve_values asks only the ends when it sums a curve itself)."""
+
+    def __init__(self, curve) -> None:  # type: ignore[no-untyped-def]
+        self.curve, self.values = curve, 0
+
+    def Value(self, t: float):  # type: ignore[no-untyped-def]  # noqa: N802
+        self.values += 1
+        return self.curve.Value(t)
+
+    def __getattr__(self, name: str):  # type: ignore[no-untyped-def]
+        return getattr(self.curve, name)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_ellipses_and_periodic_bsplines_are_summed_in_bulk(dim):
+    """An ellipse in closed form and a periodic B-spline on a non-periodic copy, asked over three periods: OCCT's own
+    points, with Value asked at the two ends only, and the curve itself left periodic."""
+    from OCP import Geom, Geom2d, Geom2dAdaptor, GeomAdaptor, gp
+    from OCP.TColgp import TColgp_Array1OfPnt, TColgp_Array1OfPnt2d
+    from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
+
+    from amprep.geometry.cad.occt_arrays import curve_values
+
+    pnt = (lambda x, y: gp.gp_Pnt2d(x, y)) if dim == 2 else (lambda x, y: gp.gp_Pnt(x, y, 0.3 * x * y))
+    poles = (TColgp_Array1OfPnt2d if dim == 2 else TColgp_Array1OfPnt)(1, 7)
+    for i in range(7):
+        poles.SetValue(i + 1, pnt(3 * np.cos(i), 2 * np.sin(1.3 * i)))
+    knots, mults = TColStd_Array1OfReal(1, 8), TColStd_Array1OfInteger(1, 8)
+    for i in range(8):
+        knots.SetValue(i + 1, 0.2 + 0.7 * i + 0.05 * i * i)
+        mults.SetValue(i + 1, 1)
+    if dim == 2:
+        spline = Geom2d.Geom2d_BSplineCurve(poles, knots, mults, 3, True)
+        ellipse = Geom2d.Geom2d_Ellipse(gp.gp_Ax22d(gp.gp_Pnt2d(1, 2), gp.gp_Dir2d(0.6, 0.8), True), 5.0, 2.0)
+        adapt = Geom2dAdaptor.Geom2dAdaptor_Curve
+    else:
+        spline = Geom.Geom_BSplineCurve(poles, knots, mults, 3, True)
+        ellipse = Geom.Geom_Ellipse(gp.gp_Ax2(gp.gp_Pnt(1, 2, 3), gp.gp_Dir(1, 1, 1)), 5.0, 2.0)
+        adapt = GeomAdaptor.GeomAdaptor_Curve
+    for geom in (spline, ellipse):
+        curve = _CountingCurve(adapt(geom))
+        t = np.linspace(-7.0, 11.0, 4 * curve.NbPoles() + 1 if geom is spline else 41)
+        got = curve_values(curve, t)
+        assert curve.values == 2
+        want = np.array([geom.Value(float(x)).Coord() for x in t])
+        assert np.allclose(got, want, rtol=0, atol=1e-12 * (1 + np.abs(want).max()))
+    assert spline.IsPeriodic()

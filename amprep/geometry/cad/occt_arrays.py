@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import numpy as np
-from OCP.GeomAbs import GeomAbs_BSplineCurve, GeomAbs_Circle, GeomAbs_Line
+from OCP.GeomAbs import GeomAbs_BSplineCurve, GeomAbs_Circle, GeomAbs_Ellipse, GeomAbs_Line
 
 from amprep.geometry.cad.bspline import eval_curve
 
@@ -27,37 +27,49 @@ def array1(arr) -> np.ndarray:  # type: ignore[no-untyped-def]
     return np.array([arr.Value(i) for i in range(arr.Lower(), arr.Upper() + 1)], dtype=float)
 
 
-#: a line, circle or B-spline summed here must give OCCT's own points at its ends to this × (1 + |point|), else it is
+#: a line, circle, ellipse or B-spline summed here must give OCCT's own points at its ends to this × (1 + |point|), else it is
 #: asked of OCCT point by point
 _CLOSED_FORM_RTOL = 1e-9
 
 
 def curve_values(curve, t: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
     """(n, d) the points at params t (n,) of a curve adaptor (BRepAdaptor_Curve: d = 3; Geom2dAdaptor_Curve: d = 2):
-    a line (L + t D) or circle (C + R (cos t X + sin t Y)) in closed form, a non-periodic B-spline asked at twice its
-    poles or more by bspline.eval_curve, each checked against the adaptor's own Value at the first and last param;
-    any other curve point by point."""
+    a line (L + t D), circle (C + R (cos t X + sin t Y)) or ellipse (C + a cos t X + b sin t Y) in closed form, a
+    B-spline asked at twice its poles or more by bspline.eval_curve (a periodic one made non-periodic on a copy, t
+    taken into its first period), each checked against the adaptor's own Value at the first and last param; any other
+    curve point by point."""
     t = np.asarray(t, float).ravel()
     kind = curve.GetType()
     out = None
     if len(t) > 2 and kind == GeomAbs_Line:
         line = curve.Line()
         out = _xy(line.Location()) + t[:, None] * _xy(line.Direction())
-    elif len(t) > 2 and kind == GeomAbs_Circle:
-        circle = curve.Circle()
-        centre, x, y = _xy(circle.Location()), _xy(circle.XAxis().Direction()), _xy(circle.YAxis().Direction())
-        out = centre + circle.Radius() * (np.cos(t)[:, None] * x + np.sin(t)[:, None] * y)
-    elif kind == GeomAbs_BSplineCurve and len(t) >= 2 * curve.NbPoles() and not curve.IsPeriodic():
-        spline = curve.BSpline()  # a BRepAdaptor_Curve's is a copy placed by the edge's location
-        n = spline.NbPoles()
-        poles = np.array([_xy(spline.Pole(i)) for i in range(1, n + 1)])
-        weights = np.array([spline.Weight(i) for i in range(1, n + 1)]) if spline.IsRational() else np.ones(n)
-        out = eval_curve(poles, weights, array1(spline.KnotSequence()), spline.Degree(), t)
+    elif len(t) > 2 and kind in (GeomAbs_Circle, GeomAbs_Ellipse):
+        conic = curve.Circle() if kind == GeomAbs_Circle else curve.Ellipse()
+        a, b = ((conic.Radius(),) * 2 if kind == GeomAbs_Circle else (conic.MajorRadius(), conic.MinorRadius()))
+        centre, x, y = _xy(conic.Location()), _xy(conic.XAxis().Direction()), _xy(conic.YAxis().Direction())
+        out = centre + a * np.cos(t)[:, None] * x + b * np.sin(t)[:, None] * y
+    elif kind == GeomAbs_BSplineCurve and len(t) >= 2 * curve.NbPoles():
+        out = _bspline_values(curve.BSpline(), t)
     if out is not None:
         ends = np.array([_xy(curve.Value(float(t[0]))), _xy(curve.Value(float(t[-1])))])
         if np.all(np.abs(out[[0, -1]] - ends) <= _CLOSED_FORM_RTOL * (1 + np.abs(ends))):
             return out
     return np.array([_xy(curve.Value(float(x))) for x in t], float).reshape(len(t), -1)
+
+
+def _bspline_values(spline, t: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """(n, d) a Geom or Geom2d B-spline curve's points at t (n,) by bspline.eval_curve; a periodic one on a
+    non-periodic copy (the adaptor's may be the model's own curve), t taken into [first, first + period)."""
+    if spline.IsPeriodic():
+        first, period = spline.FirstParameter(), spline.Period()
+        spline = spline.Copy()
+        spline.SetNotPeriodic()
+        t = first + np.mod(t - first, period)
+    n = spline.NbPoles()
+    poles = np.array([_xy(spline.Pole(i)) for i in range(1, n + 1)])
+    weights = np.array([spline.Weight(i) for i in range(1, n + 1)]) if spline.IsRational() else np.ones(n)
+    return eval_curve(poles, weights, array1(spline.KnotSequence()), spline.Degree(), t)
 
 
 def _xy(p) -> np.ndarray:  # type: ignore[no-untyped-def]
