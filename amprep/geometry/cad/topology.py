@@ -55,6 +55,7 @@ class Topology:
     parent: dict[int, int] = field(default_factory=dict)  # union-find over B-rep vertices of collapsed edges
     _facts: dict[int, tuple[int, int, float, int, float, bool]] = field(default_factory=dict, repr=False)
     _areas: dict[TopoDS_Face, float] = field(default_factory=dict, repr=False)
+    _lengths: dict[int, tuple[np.ndarray, float]] = field(default_factory=dict, repr=False)  # shared_edges.edge_length
 
     def merge_vertices(self, a: int, b: int) -> None:
         """Record that the mesher collapsed an edge: its two end vertices become one mesh vertex."""

@@ -84,9 +84,17 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
             topo.edge_params[ei] = discretize_edge(edge, tolerance, angular)
 
 
-def edge_length(edge: TopoDS_Edge, params: np.ndarray) -> float:
-    """The length of an edge's discretisation at params (n,): Σ of its chords."""
-    return float(np.linalg.norm(np.diff(edge_points(edge, params), axis=0), axis=1).sum())
+def edge_length(edge: TopoDS_Edge, params: np.ndarray, topo: Topology | None = None) -> float:
+    """The length of an edge's discretisation at params (n,): Σ of its chords; given its topology, kept there while
+    the edge's params are that same array."""
+    ei = topo.edge_index(edge) if topo is not None else -1
+    known = topo._lengths.get(ei) if topo is not None else None
+    if known is not None and known[0] is params:
+        return known[1]
+    length = float(np.linalg.norm(np.diff(edge_points(edge, params), axis=0), axis=1).sum())
+    if topo is not None:
+        topo._lengths[ei] = (params, length)
+    return length
 
 
 #: a face whose perimeter is under this × the collapse length keeps its edges (collapse_short_edges)
@@ -109,7 +117,7 @@ def collapse_short_edges(faces: list[TopoDS_Face], topo: Topology, shortest: flo
             if degenerate or params is None:
                 continue
             if ei not in edges:
-                edges[ei] = (v1, v2, params, edge_length(edge, params))
+                edges[ei] = (v1, v2, params, edge_length(edge, params, topo))
             perimeter += edges[ei][3]
             own.append(ei)
         if perimeter < TINY_FACE * shortest:
@@ -231,7 +239,7 @@ def face_width(face: TopoDS_Face, topo: Topology) -> float:
             continue
         params = topo.edge_params.get(topo.edge_index(edge))
         if params is not None and len(params) > 1:
-            perimeter += edge_length(edge, params)
+            perimeter += edge_length(edge, params, topo)
     return 2 * topo.face_area(face) / perimeter if perimeter > 0 else np.inf
 
 
