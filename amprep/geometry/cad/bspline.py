@@ -106,7 +106,7 @@ def homogeneous_poles(poles: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def eval_homogeneous(pw: np.ndarray, uknots: np.ndarray, vknots: np.ndarray, udeg: int, vdeg: int,
                      uv: np.ndarray, cache: dict | None = None) -> np.ndarray:  # type: ignore[type-arg]
     """eval_surface from homogeneous_poles and contiguous float64 knots, made once per surface (`cache`: where the
-    kernel's span polynomials are kept, kernel_bases).
+    kernel's Bernstein forms of the basis are kept, kernel_bases).
 
     The numba kernel of _bspline_kernel.py runs where core.compiled.use_compiled says (the computation's choice, or
     calls of ≥ COMPILED_MIN_POINTS points), numpy otherwise, so a small part never pays numba's ~0.7 s start-up and

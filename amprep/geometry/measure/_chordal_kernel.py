@@ -56,16 +56,16 @@ def _turns(a, m, k, cos_t, sin_t):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _revolved(kind, prm, u, v, cu, su, cv, sv):
+def _revolved(kind, prm, u, v, cu, su, cv, sv, sin_b, cos_b):
     """S(u,v) of a closed-form surface given cos u, sin u, cos v, sin v; prm = O(3), X(3), Y(3), Z(3), a, b (radius /
-    semi-angle / radii)."""
+    semi-angle / radii), sin_b, cos_b = sin b, cos b (a cone's semi-angle)."""
     if kind == PLANE:
         c0, c1, c2 = u, v, 0.0
     elif kind == CYLINDER:
         c0, c1, c2 = prm[12] * cu, prm[12] * su, v
     elif kind == CONE:
-        rad = prm[12] + v * np.sin(prm[13])
-        c0, c1, c2 = rad * cu, rad * su, v * np.cos(prm[13])
+        rad = prm[12] + v * sin_b
+        c0, c1, c2 = rad * cu, rad * su, v * cos_b
     elif kind == SPHERE:
         rc = prm[12] * cv
         c0, c1, c2 = rc * cu, rc * su, prm[12] * sv
@@ -84,6 +84,7 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, start, end):
     cu, su, cv, sv = np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1))
     turn_u = kind != PLANE
     turn_v = kind == SPHERE or kind == TORUS
+    sin_b, cos_b = np.sin(prm[13]), np.cos(prm[13])
     au, av = uv[:, :, 0], uv[:, :, 1]
     for m in range(start, end):
         c = corners[m]
@@ -97,7 +98,7 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, start, end):
             for p in range(w.shape[0]):
                 u, v = _sample(w, uv, m, p)
                 i, j = ij[p, 0], ij[p, 1]
-                xyz = _revolved(kind, prm, u, v, cu[i, j], su[i, j], cv[i, j], sv[i, j])
+                xyz = _revolved(kind, prm, u, v, cu[i, j], su[i, j], cv[i, j], sv[i, j], sin_b, cos_b)
                 best = max(best, _distance(c, nx, ny, nz, xyz))
                 if best > stop:
                     break
