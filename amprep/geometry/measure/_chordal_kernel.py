@@ -145,9 +145,9 @@ def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out
 
 @njit(cache=True, nogil=True, parallel=True)
 def bspline_chordal_kernel(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
-    """The same for a rational B-spline (poles·weights | weights (nu, nv, 4); ub, vb: each direction's knots and span
-    polynomials, _bspline_kernel.point_kernel's); a periodic direction's parameter is wrapped into [uper[0], uper[1])
-    (uper[1] ≤ uper[0]: not periodic)."""
+    """The same for a rational B-spline (poles·weights | weights (nu, nv, 4); ub, vb: each direction's knots and the
+    Bernstein forms of its basis, _bspline_kernel.point_kernel's); a periodic direction's parameter is wrapped into
+    [uper[0], uper[1]) (uper[1] ≤ uper[0]: not periodic)."""
     n = corners.shape[0]
     for blk in prange((n + BLOCK - 1) // BLOCK):
         _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, blk * BLOCK,

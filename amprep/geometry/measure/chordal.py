@@ -102,7 +102,6 @@ def barycentric_grid(order: int) -> np.ndarray:
     return w
 
 
-@lru_cache(maxsize=32)
 def _grid_order(points: int) -> int:
     """k of the order-k barycentric grid with `points` = (k+1)(k+2)/2 points."""
     k = int(round((np.sqrt(8 * points + 1) - 3) / 2))
@@ -110,6 +109,7 @@ def _grid_order(points: int) -> int:
     return k
 
 
+@lru_cache(maxsize=32)
 def _interior_first(order: int) -> np.ndarray:
     """The order-k grid's points, those farthest from the triangle's sides first (where a curved surface leaves the
     triangle's plane most): a triangle over a stop value is found with few points."""

@@ -87,14 +87,13 @@ def discretize_missing_edges(face: TopoDS_Face, topo: Topology, tolerance: float
 def edge_length(edge: TopoDS_Edge, params: np.ndarray, topo: Topology | None = None) -> float:
     """The length of an edge's discretisation at params (n,): Σ of its chords; given its topology, kept there while
     the edge's params are that same array."""
-    ei = topo.edge_index(edge) if topo is not None else -1
-    known = topo._lengths.get(ei) if topo is not None else None
-    if known is not None and known[0] is params:
-        return known[1]
-    length = float(np.linalg.norm(np.diff(edge_points(edge, params), axis=0), axis=1).sum())
-    if topo is not None:
-        topo._lengths[ei] = (params, length)
-    return length
+    if topo is None:
+        return float(np.linalg.norm(np.diff(edge_points(edge, params), axis=0), axis=1).sum())
+    ei = topo.edge_index(edge)
+    known = topo._lengths.get(ei)
+    if known is None or known[0] is not params:
+        known = topo._lengths[ei] = (params, edge_length(edge, params))
+    return known[1]
 
 
 #: a face whose perimeter is under this × the collapse length keeps its edges (collapse_short_edges)
@@ -447,9 +446,8 @@ def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[
     for surface, pairs in by_face.values():
         median = _bounded_median_speeds(surface) if surface.bounds is not None else None
         uv = np.concatenate([uv for _, uv, _ in pairs])
-        ends = [(*np.sort(q[[0, -1], 0]), *np.sort(q[[0, -1], 1])) for _, q, _ in pairs]  # a box where none is known
-        floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(
-            median if median is not None else _median_speeds(surface, box), q.shape) for (_, q, _), box in zip(pairs, ends)])
+        floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(median if median is not None else _median_speeds(
+            surface, (*np.sort(q[[0, -1], 0]), *np.sort(q[[0, -1], 1]))), q.shape) for _, q, _ in pairs])  # its ends' box
         h = np.concatenate([np.full(len(q), difference_step(q)) for _, q, _ in pairs])  # each pair's own step
         speeds = np.stack(surface_speeds(surface, uv, uv, step=h), axis=1)
         step = np.minimum(STENCIL * target / np.maximum(np.maximum(speeds, floor), 1e-300), uv_extent(surface) / 8)
