@@ -23,6 +23,12 @@ def norms(a: np.ndarray) -> np.ndarray:
     return np.sqrt(a[..., 0] * a[..., 0] + a[..., 1] * a[..., 1] + a[..., 2] * a[..., 2])
 
 
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(...,) a₀b₀ + a₁b₁ + a₂b₂ of (..., 3) arrays, summed in that order (einsum's order depends on its loop)."""
+    a, b = np.asarray(a), np.asarray(b)
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def turn(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(k,) (b − a) × (c − a) of 2-D points a, b, c (k, 2): twice the signed area of the triangle (> 0: a left turn)."""
     return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])

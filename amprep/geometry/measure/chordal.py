@@ -12,6 +12,7 @@ from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.compiled import compiled, use_compiled
 from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import norms, unit_normals
+from amprep.geometry.measure.angles import load_angle_kernels, warm_angle_kernels
 
 _CHUNK_POINTS = 1_000_000
 #: triangles per call of a compiled kernel (~0.1 s of a B-spline face at order 6 here): checkpoint() between calls
@@ -33,6 +34,7 @@ def load_kernels() -> None:
 
         _kernels = _chordal_kernel
         _bspline.load_kernel()
+        load_angle_kernels()
 
 
 def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
@@ -71,6 +73,7 @@ def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
             for tris, points in ((1, 1), (_kernels.BLOCK + 1, EVAL_BLOCK + 1)):  # serial, then parallel kernels
                 surface.evaluate(np.repeat(uv[0], points, axis=0))
                 triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
+    warm_angle_kernels()
     global _warm
     _warm = True
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amprep.geometry.core.vectors import cross, norms, triangle_normals
+from amprep.geometry.core.vectors import cross, dot, norms, triangle_normals
 
 #: The source table's bins: [0, 0.005), [0.005, 0.4), [0.4, 0.8), [0.8, 1.0].
 BIN_EDGES = np.array([0.0, 0.005, 0.4, 0.8])
@@ -23,12 +23,17 @@ def min_angles(corners: np.ndarray) -> np.ndarray:
     atan2(|a × b|, a · b) of the two sides at that corner (exact for slivers too); 0 for one with a zero-length side."""
     c0, c1, c2 = corners[:, 0], corners[:, 1], corners[:, 2]
     sides = np.stack([c1 - c0, c2 - c1, c0 - c2], axis=1)  # side k runs from corner k to k+1, opposite corner k+2
-    sq = np.einsum("mkd,mkd->mk", sides, sides)
+    sq = dot(sides, sides)
     k = sq.argmin(axis=1)
     rows = np.arange(len(corners))
     a, b = sides[rows, (k + 2) % 3], -sides[rows, (k + 1) % 3]  # from corner k+2 to corners k and k+1
-    angle = np.arctan2(norms(cross(a, b)), np.einsum("md,md->m", a, b))
-    return np.where((sq[rows, k] > 0) & np.isfinite(angle), angle, 0.0)
+    return angles_from(norms(cross(a, b)), dot(a, b), sq[rows, k] > 0)
+
+
+def angles_from(y: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(m,) arctan2(y, x) where ok (m,) and it is finite, else 0: min_angles' last step, the compiled kernel's too."""
+    angle = np.arctan2(y, x)
+    return np.where(ok & np.isfinite(angle), angle, 0.0)
 
 
 def regularity(corners: np.ndarray) -> dict[str, np.ndarray]:

@@ -14,9 +14,9 @@ from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.progress import within_budget
-from amprep.geometry.core.vectors import cross, turn
+from amprep.geometry.core.vectors import cross, dot, turn
+from amprep.geometry.measure.angles import flip_candidates, min_angles_at, unit_normals_at
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
-from amprep.geometry.measure.regularity import min_angles
 from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
@@ -210,13 +210,6 @@ SMOOTH_GAIN = np.pi / 3 * 0.01
 SMOOTH_SETS = 64
 
 
-def _unit_normals(corners: np.ndarray) -> np.ndarray:
-    """(t, 3) unit normals of triangles (t, 3, 3) in space (0 for a degenerate one)."""
-    n = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    size = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(size > 0, size, 1.0)
-
-
 def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t1, k1, t2, k2): triangle t1's side k1 (corners k1, k1+1) is triangle t2's side k2, for every shared side."""
     packed = _packed_sides(tris, n)
@@ -272,24 +265,21 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         return patch
     tris, err, xyz, uv = patch.tris.copy(), patch.error.copy(), patch.nodes, patch.uv
     sign = 1.0 if _signed_area2(uv, tris).sum() >= 0 else -1.0
-    angle = min_angles(xyz[tris])
+    angle = min_angles_at(xyz, tris)
+    normals = unit_normals_at(xyz, tris)
     active = np.ones(len(tris), bool)  # a pair of triangles neither of which changed has nothing new to offer
     packed = _packed_sides(tris, len(xyz))
     for _ in range(FLIP_PASSES):
         t1, k1, t2, k2 = _shared_sides(tris, len(xyz)) if packed is None else _pairs(packed, 3 * len(tris))
         look = active[t1] | active[t2]
         t1, k1, t2, k2 = t1[look], k1[look], t2[look], k2[look]
-        a, b, c = tris[t1, k1], tris[t1, (k1 + 1) % 3], tris[t1, (k1 + 2) % 3]
-        new1, new2 = np.stack([a, tris[t2, (k2 + 2) % 3], c], axis=1), np.stack([tris[t2, (k2 + 2) % 3], b, c], axis=1)
-        angle1, angle2 = min_angles(xyz[new1]), min_angles(xyz[new2])
-        gain = np.minimum(angle1, angle2) - np.minimum(angle[t1], angle[t2])
-        fold_old = np.einsum("ij,ij->i", _unit_normals(xyz[tris[t1]]), _unit_normals(xyz[tris[t2]]))
-        fold_new = np.einsum("ij,ij->i", _unit_normals(xyz[new1]), _unit_normals(xyz[new2]))
+        f = flip_candidates(xyz, uv, tris, normals, t1, k1, t2, k2)
+        gain = np.minimum(f.angle1, f.angle2) - np.minimum(angle[t1], angle[t2])
         # a pair folded against each other in space is unfolded first, whatever the angles; no flip folds a pair
-        repair = (fold_old < FOLD_COS) & (fold_new > fold_old)
-        gain = np.where(repair, np.pi + fold_new - fold_old, gain if angles else -1.0)
-        ok = np.flatnonzero((gain > FLIP_GAIN) & (fold_new >= np.minimum(fold_old, FOLD_COS))
-                            & (sign * _signed_area2(uv, new1) > 0) & (sign * _signed_area2(uv, new2) > 0))
+        repair = (f.fold_old < FOLD_COS) & (f.fold_new > f.fold_old)
+        gain = np.where(repair, np.pi + f.fold_new - f.fold_old, gain if angles else -1.0)
+        ok = np.flatnonzero((gain > FLIP_GAIN) & (f.fold_new >= np.minimum(f.fold_old, FOLD_COS))
+                            & (sign * f.area1 > 0) & (sign * f.area2 > 0))
         if not len(ok):
             break
         rank = np.empty(len(ok), np.int64)
@@ -298,17 +288,18 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
         np.minimum.at(best, t1[ok], rank)
         np.minimum.at(best, t2[ok], rank)
         pick = ok[(best[t1[ok]] == rank) & (best[t2[ok]] == rank)]
-        both = np.concatenate([new1[pick], new2[pick]])
+        both = np.concatenate([f.new1[pick], f.new2[pick]])
         e = triangle_chordal_error(xyz[both], uv[both], surface, order, affine=surface.affine, stop=tolerance)
         keep = (e[:len(pick)] <= tolerance) & (e[len(pick):] <= tolerance)
         if not keep.any():
             break
         p = pick[keep]
-        tris[t1[p]], tris[t2[p]] = new1[p], new2[p]
+        tris[t1[p]], tris[t2[p]] = f.new1[p], f.new2[p]
         if packed is not None:
             packed = _repacked(packed, tris, np.concatenate([t1[p], t2[p]]), len(xyz))
         err[t1[p]], err[t2[p]] = e[:len(pick)][keep], e[len(pick):][keep]
-        angle[t1[p]], angle[t2[p]] = angle1[p], angle2[p]
+        angle[t1[p]], angle[t2[p]] = f.angle1[p], f.angle2[p]
+        normals[t1[p]], normals[t2[p]] = f.normal1[p], f.normal2[p]
         active[:] = False
         active[t1[p]] = active[t2[p]] = True
     return replace(patch, tris=tris, error=err)
@@ -320,8 +311,8 @@ def unfold(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6)
     if patch.uv is None or patch.error is None or not len(patch.tris):
         return patch
     t1, _, t2, _ = _shared_sides(patch.tris, len(patch.nodes))
-    n = _unit_normals(patch.nodes[patch.tris])
-    if not (np.einsum("ij,ij->i", n[t1], n[t2]) < FOLD_COS).any():
+    n = unit_normals_at(patch.nodes, patch.tris)
+    if not (dot(n[t1], n[t2]) < FOLD_COS).any():
         return patch
     return flip_for_angles(patch, surface, tolerance, order, angles=False)
 
@@ -389,7 +380,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
     sides = edge_incidence(tris).edges
     ring = _rings(sides, n)
     sign = np.sign(_signed_area2(uv, tris))
-    angle = min_angles(xyz[tris])
+    angle = min_angles_at(xyz, tris)
     priority = (np.arange(n, dtype=np.uint64) * np.uint64(2654435761)) % np.uint64(2**32)  # a fixed scatter
     corner_order = np.argsort(tris.ravel(), kind="stable")  # each node's triangles, node by node
     first = np.searchsorted(tris.ravel()[corner_order], np.arange(n + 1))
@@ -411,7 +402,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
             held[star] = False
             t = tris[star]
             owner = t[np.arange(len(t)), movers[t].argmax(axis=1)]  # the one moving node of each
-            new_angle = min_angles(trial_xyz[t])
+            new_angle = min_angles_at(trial_xyz, t)
             old_min, new_min = np.full(n, np.inf), np.full(n, np.inf)
             np.minimum.at(old_min, owner, angle[star])
             np.minimum.at(new_min, owner, new_angle)
