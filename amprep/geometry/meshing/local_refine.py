@@ -93,7 +93,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         boundary = boundary_pairs[:, 0] * base + boundary_pairs[:, 1]
         marked = np.zeros(len(pts), bool)
         marked[tris[bad]] = True
-        in_region = marked[tris].any(axis=1)
+        in_region = marked[tris[:, 0]] | marked[tris[:, 1]] | marked[tris[:, 2]]
         region = tris[in_region]
         new = insertion_points(pts, tris[bad], boundary, base)
         new = apart(new, pts[np.unique(region)], spacing)
@@ -104,7 +104,8 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
         # what the region surrounds (candidates: kept triangles with two nodes in the region)
         in_nodes = np.zeros(len(pts), bool)
         in_nodes[region] = True
-        near = np.flatnonzero(~in_region & (in_nodes[tris].sum(axis=1) >= 2))
+        a, b, c = in_nodes[tris[:, 0]], in_nodes[tris[:, 1]], in_nodes[tris[:, 2]]
+        near = np.flatnonzero(~in_region & ((a & b) | (a & c) | (b & c)))  # two nodes or more in the region
         rim_codes = np.unique(edge_codes(region, base))
         rim_codes = rim_codes[~in_sorted(rim_codes, boundary)]
         rim = near[in_sorted(edge_codes(tris[near], base), rim_codes).any(axis=1)]
