@@ -10,27 +10,27 @@ from numba import njit
 def _angle_parts(xyz, i0, i1, i2):
     """(|a × b|, a · b, shortest side > 0) of a triangle's corner opposite its shortest side (the first, numpy's
     argmin: a NaN side counts as shortest), a and b its two sides from that corner."""
-    s = np.empty((3, 3))
-    sq = np.empty(3)
-    idx = (i0, i1, i2)
-    for k in range(3):
-        p, q = idx[k], idx[(k + 1) % 3]
-        for d in range(3):
-            s[k, d] = xyz[q, d] - xyz[p, d]
-        sq[k] = s[k, 0] * s[k, 0] + s[k, 1] * s[k, 1] + s[k, 2] * s[k, 2]
-    k = 0
-    if not np.isnan(sq[0]):
-        for j in range(1, 3):
-            if np.isnan(sq[j]):
-                k = j
-                break
-            if sq[j] < sq[k]:
-                k = j
-    ia, ib = (k + 2) % 3, (k + 1) % 3
-    a0, a1, a2 = s[ia, 0], s[ia, 1], s[ia, 2]
-    b0, b1, b2 = -s[ib, 0], -s[ib, 1], -s[ib, 2]
+    # side k runs from corner k to corner k+1
+    s0x, s0y, s0z = xyz[i1, 0] - xyz[i0, 0], xyz[i1, 1] - xyz[i0, 1], xyz[i1, 2] - xyz[i0, 2]
+    s1x, s1y, s1z = xyz[i2, 0] - xyz[i1, 0], xyz[i2, 1] - xyz[i1, 1], xyz[i2, 2] - xyz[i1, 2]
+    s2x, s2y, s2z = xyz[i0, 0] - xyz[i2, 0], xyz[i0, 1] - xyz[i2, 1], xyz[i0, 2] - xyz[i2, 2]
+    q0 = s0x * s0x + s0y * s0y + s0z * s0z
+    q1 = s1x * s1x + s1y * s1y + s1z * s1z
+    q2 = s2x * s2x + s2y * s2y + s2z * s2z
+    k, q = 0, q0
+    if not np.isnan(q0):
+        if np.isnan(q1) or q1 < q0:
+            k, q = 1, q1
+        if not np.isnan(q) and (np.isnan(q2) or q2 < q):
+            k, q = 2, q2
+    if k == 0:  # a = side k+2, b = −side k+1
+        a0, a1, a2, b0, b1, b2 = s2x, s2y, s2z, -s1x, -s1y, -s1z
+    elif k == 1:
+        a0, a1, a2, b0, b1, b2 = s0x, s0y, s0z, -s2x, -s2y, -s2z
+    else:
+        a0, a1, a2, b0, b1, b2 = s1x, s1y, s1z, -s0x, -s0y, -s0z
     c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-    return np.sqrt(c0 * c0 + c1 * c1 + c2 * c2), a0 * b0 + a1 * b1 + a2 * b2, sq[k] > 0
+    return np.sqrt(c0 * c0 + c1 * c1 + c2 * c2), a0 * b0 + a1 * b1 + a2 * b2, q > 0
 
 
 @njit(cache=True, nogil=True)
