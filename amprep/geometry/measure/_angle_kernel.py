@@ -1,5 +1,5 @@
 """Compiled smallest angles, unit normals and flip candidates of triangles over nodes, with no (m, 3, 3) gather: each
-product and sum in the order of the numpy formulas beside them (regularity.min_angles, local_refine's flips, written
+product and sum in the order of the numpy formulas beside them (regularity.min_angles, core.vectors.unit_normals, written
 out per component as core.vectors does), so the two give the same bits; the angle's arctan2 is left to numpy."""
 
 import numpy as np
@@ -42,14 +42,15 @@ def min_angle_parts(xyz, tris, y, x, ok):
 
 @njit(cache=True, nogil=True, inline="always")
 def _unit_normal(xyz, i0, i1, i2, out):
-    """out (3,) ← (c₁ − c₀) × (c₂ − c₀) / its length (unscaled where 0)."""
+    """out (3,) ← (c₁ − c₀) × (c₂ − c₀) / its length, 0 where that length is not > 0 (core.vectors.unit_normals)."""
     ax, ay, az = xyz[i1, 0] - xyz[i0, 0], xyz[i1, 1] - xyz[i0, 1], xyz[i1, 2] - xyz[i0, 2]
     bx, by, bz = xyz[i2, 0] - xyz[i0, 0], xyz[i2, 1] - xyz[i0, 1], xyz[i2, 2] - xyz[i0, 2]
     nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
     length = np.sqrt(nx * nx + ny * ny + nz * nz)
-    if not length > 0:
-        length = 1.0
-    out[0], out[1], out[2] = nx / length, ny / length, nz / length
+    if length > 0:
+        out[0], out[1], out[2] = nx / length, ny / length, nz / length
+    else:
+        out[0], out[1], out[2] = 0.0, 0.0, 0.0
 
 
 @njit(cache=True, nogil=True)

@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 
 from amprep.geometry.core.compiled import compiled, use_compiled
-from amprep.geometry.core.vectors import cross, dot, norms, turn
+from amprep.geometry.core.vectors import dot, turn, unit_normals
 from amprep.geometry.measure.regularity import angles_from, min_angles
 
 #: a call of at least this many triangles runs the kernels when no enclosing computation chose (core.compiled)
@@ -41,10 +41,10 @@ def min_angles_at(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 
 def unit_normals_at(xyz: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(m, 3) unit normals (c₁ − c₀) × (c₂ − c₀) / |…| of triangles tris (m, 3) over nodes xyz (n, 3), 0 for a
-    degenerate one."""
+    """(m, 3) core.vectors.unit_normals of the triangles tris (m, 3) over nodes xyz (n, 3): (c₁ − c₀) × (c₂ − c₀) / |…|,
+    0 where that length is not > 0."""
     if not use_compiled(len(tris), COMPILED_MIN_TRIANGLES):
-        return _unit_normals(xyz[tris])
+        return unit_normals(xyz[tris])[0]
     out = np.empty((len(tris), 3))
     load_angle_kernels().unit_normals(_f64(xyz), _i64(tris), out)
     return out
@@ -84,7 +84,7 @@ def flip_candidates(xyz: np.ndarray, uv: np.ndarray, tris: np.ndarray, normals: 
     a, b, c = tris[t1, k1], tris[t1, (k1 + 1) % 3], tris[t1, (k1 + 2) % 3]
     d = tris[t2, (k2 + 2) % 3]
     new1, new2 = np.stack([a, d, c], axis=1), np.stack([d, b, c], axis=1)
-    normal1, normal2 = _unit_normals(xyz[new1]), _unit_normals(xyz[new2])
+    normal1, normal2 = unit_normals(xyz[new1])[0], unit_normals(xyz[new2])[0]
     return Flips(new1, new2, min_angles(xyz[new1]), min_angles(xyz[new2]), normal1, normal2,
                  turn(uv[a], uv[d], uv[c]), turn(uv[d], uv[b], uv[c]), dot(normals[t1], normals[t2]),
                  dot(normal1, normal2))
@@ -100,13 +100,6 @@ def warm_angle_kernels() -> None:
         min_angles_at(xyz, tris)
         one = np.array([1])
         flip_candidates(xyz, uv, tris, normals, np.array([0]), one, one, np.array([0]))
-
-
-def _unit_normals(corners: np.ndarray) -> np.ndarray:
-    """(t, 3) unit normals of triangles (t, 3, 3) in space (0 for a degenerate one)."""
-    n = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    size = norms(n)[:, None]
-    return n / np.where(size > 0, size, 1.0)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
