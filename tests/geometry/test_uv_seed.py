@@ -46,6 +46,50 @@ def test_cells_of_a_cylinder_are_as_wide_as_the_chord_allows_and_uncut_along_the
     assert np.isclose(sizes.prod(axis=1).sum(), 2 * np.pi * 30.0)  # the cells tile the box
 
 
+@pytest.mark.parametrize(("need", "cut", "quality_cut"), [(5.04, 5, 6), (2.05, 2, 3), (1.05, 1, 1), (0.9, 1, 1)])
+def test_the_quality_mesher_keeps_slack_only_for_whether_a_cell_is_cut(need, cut, quality_cut):
+    """A cylinder's box whose angle needs `need` cells by the chord: the default rounds a little over a whole number
+    down (SLACK), the quality mesher up, every cell then within the chord (a face of even curvature: every cell the
+    same fraction over, all its triangles over); both leave a cell needing under 2 whole (one more would double it)."""
+    cyl = Surface("cylinder", cylinder(ORIGIN, X, Y, Z, 10.0))
+    target = 0.01
+    allowed = np.sqrt(8 * target / 10.0)
+    box = np.array([[0.0, 0.0], [need * allowed, 30.0]])
+    for leaf_slack, expected in ((False, cut), (True, quality_cut)):
+        centers, sizes = uv_seed.size_cells(cyl, box, target, leaf_slack=leaf_slack)
+        assert len(sizes) == expected and np.allclose(sizes[:, 0], need * allowed / expected)
+    assert need < 2 or (sizes[:, 0] <= allowed).all()
+
+
+def test_a_fillet_cylinder_is_seeded_within_the_chord_not_mended_by_refinement():
+    """occt_top's 1 mm fillets at 0.01 mm (1.412 rad × 31.7 mm) need 5.04 cells around: cut into 5, every cell 0.9 %
+    too wide, refinement took the face from 874 triangles to 3,650; cut into 6, it adds a few. Within the tolerance
+    by OCCT's distance."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.gp import gp_Ax3, gp_Cylinder, gp_Dir, gp_Pnt
+
+    from amprep.geometry.cad.read import model_from_shape
+    from amprep.geometry.meshing.pipeline import mesh_model
+    from tests.geometry.test_independent_distance import _worst_distance
+
+    face = BRepBuilderAPI_MakeFace(gp_Cylinder(gp_Ax3(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), 1.0), 0.0, 1.412, 0.0,
+                                   31.7).Face()
+    seeded = []
+    real = fallback.refine_patch
+
+    def spy(patch, error, *args, **kwargs):
+        seeded.append(len(error))
+        return real(patch, error, *args, **kwargs)
+
+    model = model_from_shape(face)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(fallback, "refine_patch", spy)
+        r = mesh_model(model, MeshParams(tolerance=0.01, mesher="quality"))
+    assert r.mesh.faces[0].meshed_by == "quality" and len(seeded) == 1
+    assert len(r.mesh.triangles) < 1.5 * seeded[0]  # measured: 1,604 from 1,298 (3,650 from 874 before)
+    assert r.max_error <= 0.01 and _worst_distance(model, r.mesh, samples=60) <= 0.01 * 1.001
+
+
 @pytest.fixture(scope="module")
 def ctc02_face35():
     """CTC-02's large periodic B-spline face 35 at 0.01 mm: OCCT leaves 15 interior nodes in it and misses the

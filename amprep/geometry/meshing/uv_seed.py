@@ -22,7 +22,9 @@ from amprep.geometry.meshing.uv_cdt import inside_loops, surface_speeds
 #: their square root, its children then judged at their own centres
 EXACT_SPLIT = 16
 #: a cell needing up to this much more than a whole number of parts gets that number (refinement mends the few
-#: triangles over): a full extra part would cut the error to well under the target (≈ 2× the points)
+#: triangles over): a full extra part would cut the error to well under the target (≈ 2× the points); the quality
+#: mesher keeps it only for whether a cell is cut at all (a face of even curvature needs the same fraction over in
+#: every cell, so all its triangles would come out over and refinement would multiply them)
 SLACK = 0.1
 MAX_SPLIT = 64
 MAX_LEVELS = 16
@@ -142,10 +144,11 @@ def split_cells(centers: np.ndarray, sizes: np.ndarray, ku: np.ndarray, kv: np.n
     return centers[parent] - sizes[parent] / 2 + child * (index + 0.5), child
 
 
-def _split_count(parts: np.ndarray) -> np.ndarray:
-    """(n,) int cuts of a cell that needs `parts` (n,) parts: all of them up to EXACT_SPLIT, else about their square
-    root (the children, judged at their own centres, cut again), at most MAX_SPLIT."""
-    k = np.ceil(parts - SLACK)
+def _split_count(parts: np.ndarray, leaf_slack: bool = False) -> np.ndarray:
+    """(n,) int cuts of a cell that needs `parts` (n,) parts: all of them up to EXACT_SPLIT (SLACK off them, with
+    `leaf_slack` only where fewer than 2 are needed), else about their square root (the children, judged at their
+    own centres, cut again), at most MAX_SPLIT."""
+    k = np.where(parts < 2, np.ceil(parts - SLACK), np.ceil(parts)) if leaf_slack else np.ceil(parts - SLACK)
     k = np.where(k > EXACT_SPLIT, np.ceil(np.sqrt(k)), k)
     return np.clip(k, 1, MAX_SPLIT).astype(np.int64)
 
@@ -156,12 +159,12 @@ def polygon_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
-def size_cells(surface: Surface, b_uv: np.ndarray, target: float,
-               share: float = 1.0) -> tuple[np.ndarray, np.ndarray] | None:
+def size_cells(surface: Surface, b_uv: np.ndarray, target: float, share: float = 1.0,
+               leaf_slack: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """Leaf cells (centers (n, 2), sizes (n, 2)) of the boundary's (u,v) box cut until, by the second form at each
     cell's centre, the deviation of its sides (|L| a²/8, |N| b²/8) and diagonals (|L a² ± 2M ab + N b²|/8) is at
     most `target`; None past MAX_CELLS. `share` of the cells (the part of the box the face covers) is held to the
-    triangle budget (core.progress.within_budget), two triangles a cell."""
+    triangle budget (core.progress.within_budget), two triangles a cell; `leaf_slack`: _split_count's."""
     lo, hi = b_uv.min(axis=0), b_uv.max(axis=0)
     span = np.maximum(hi - lo, 1e-12)
     step = DIFF_STEP * span
@@ -176,7 +179,7 @@ def size_cells(surface: Surface, b_uv: np.ndarray, target: float,
             b = np.minimum(np.sqrt(bound / np.abs(N)), dv)
         diagonal = np.maximum(np.abs(L * a * a + 2 * M * a * b + N * b * b), np.abs(L * a * a - 2 * M * a * b + N * b * b))
         shrink = np.sqrt(np.minimum(bound / np.maximum(diagonal, 1e-300), 1.0))
-        ku, kv = _split_count(du / (a * shrink)), _split_count(dv / (b * shrink))
+        ku, kv = _split_count(du / (a * shrink), leaf_slack), _split_count(dv / (b * shrink), leaf_slack)
         leaf = (ku == 1) & (kv == 1)
         leaf_c.append(centers[leaf])
         leaf_s.append(sizes[leaf])
@@ -237,7 +240,7 @@ def curvature_seeds(surface: Surface, loops: list[np.ndarray], target: float, le
         return None
     box = float(np.prod(np.ptp(b_uv, axis=0)))
     share = min(abs(sum(polygon_area(lp) for lp in loops)) / box, 1.0) if box > 0 else 1.0
-    cells = size_cells(surface, b_uv, target, share)
+    cells = size_cells(surface, b_uv, target, share, leaf_slack=true_metric)
     if cells is None:
         return None
     centers, sizes = cells
