@@ -65,6 +65,19 @@ def test_every_command_exists_and_parses():
     for src in re.findall(r"^COPY (.+) \S+$", dockerfile, re.M):
         for path in src.split():
             assert (ROOT / path).exists(), path
+    for run in re.findall(r"^RUN amprep (.+)$", dockerfile, re.M):
+        build_parser().parse_args(shlex.split(run))
+
+
+def test_the_image_warms_numbas_cache_as_the_user_that_runs_it():
+    """`amprep warm` runs after USER amprep, into NUMBA_CACHE_DIR, a directory made and given to that user before
+    (numba ignores a cache directory it cannot write: root's compiled kernels would be compiled again)."""
+    dockerfile = (ROOT / "docker" / "Dockerfile").read_text()
+    cache = re.search(r"NUMBA_CACHE_DIR=(\S+)", dockerfile).group(1)
+    made = re.search(r"mkdir -p [^&]*" + re.escape(cache), dockerfile)
+    owned = re.search(r"chown -R amprep:amprep [^&\n]*" + re.escape(str(Path(cache).parent)), dockerfile)
+    assert made and owned
+    assert dockerfile.index("USER amprep") < dockerfile.index("RUN amprep warm") < dockerfile.index("CMD")
 
 
 def test_api_image_command_needs_keys_on_a_public_address(tmp_path):

@@ -112,8 +112,18 @@ def _ring_masks(v: np.ndarray, tgt: np.ndarray, he: Halfedges, centre: np.ndarra
 
     table = _weight_table(int(k.max(initial=1)))
     i64 = np.int64
-    return ring_walk(np.ascontiguousarray(v, float), tgt.astype(i64), he.next_out.astype(i64), centre.astype(i64),
+    pts = np.ascontiguousarray(v, float).view()
+    pts.flags.writeable = False  # one signature (numba types a read-only array apart), the one warm_ring_kernel's
+    return ring_walk(pts, tgt.astype(i64), he.next_out.astype(i64), centre.astype(i64),
                      first.astype(i64), h0.astype(i64), k.astype(i64), table)
+
+
+def warm_ring_kernel() -> None:
+    """ring_walk dispatched once on a triangle with the types of real calls (numba compiles it, or loads its cache)."""
+    t = np.array([[0, 1, 2]])
+    he = Halfedges.of(t)
+    one = np.array([0])
+    _ring_masks(np.eye(3), t[:, [1, 2, 0]].reshape(-1), he, one, one + 1, one, one + 1)
 
 
 def _level(v: np.ndarray, t: np.ndarray, feature_keys: np.ndarray, flat: np.ndarray, corner: np.ndarray,
