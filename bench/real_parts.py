@@ -11,6 +11,8 @@ is, within the tolerance; and the triangles and seconds beside OCCT's.
         --name bench_real_parts_kicad                  # 120 of KiCad's 3D models of electronic parts
     python bench/real_parts.py --built --tools amprep,amprep-quality,occt-delabella --name bench_built_parts
                                                        # solids built here (built_parts.py), each written four ways
+    python bench/real_parts.py ... --rerun amprep-quality   # after a change to one mesher: the other tools' cells
+                                                       # are kept from docs/NAME.csv, only this one's are run again
 
 Downloads the package with `apt-get download` (no install) and writes docs/bench_real_parts.md and .csv.
 """
@@ -76,6 +78,8 @@ def main() -> None:
     ap.add_argument("--built", action="store_true", help="the solids of built_parts.py, not a package's files")
     ap.add_argument("--sample", type=int, default=0, help="only this many parts, evenly spaced over the package's "
                     "sorted list (a package of thousands, as kicad-packages3d)")
+    ap.add_argument("--rerun", help="run only these of --tools; the others' cells are kept from docs/NAME.csv (a "
+                    "change that left their output byte-identical); a cell missing there is run")
     args = ap.parse_args()
     if args.from_log:
         rows = [json.loads(line) for line in Path(args.from_log).read_text().splitlines() if line.startswith("{")]
@@ -85,16 +89,39 @@ def main() -> None:
     parts = write_built_parts(tmp / "built") if args.built else package_parts(args.package, tmp)
     if 0 < args.sample < len(parts):
         parts = [parts[i] for i in np.linspace(0, len(parts) - 1, args.sample).round().astype(int)]
+    kept = _kept_rows(ROOT / "docs" / f"{args.name}.csv", set(args.rerun.split(","))) if args.rerun else {}
     rows = []
     for part in parts:
         label = str(part.relative_to(tmp)).replace("tree/usr/share/", "")
         for tol in (float(t) for t in args.tolerances.split(",")):
             for tool in args.tools.split(","):
-                res = run_one(tool, part, tol, args.timeout)
-                row = {"part": label, "tolerance": tol, "tool": tool, **res}
+                row = kept.get((label, tol, tool))
+                if row is None:
+                    row = {"part": label, "tolerance": tol, "tool": tool, **run_one(tool, part, tol, args.timeout)}
+                    print(json.dumps(row), flush=True)
                 rows.append(row)
-                print(json.dumps(row), flush=True)
     write_tables(rows, args, len(parts))
+
+
+_FLOATS = ("tolerance", "seconds", "deviation_ratio", "angle_regularity", "peak_rss_mb")
+_INTS = ("triangles", "boundary", "nonmanifold", "degenerate")
+
+
+def _kept_rows(path: Path, rerun: set[str]) -> dict[tuple[str, float, str], dict]:
+    """{(part, tolerance, tool): row} of an earlier run's CSV for every tool not in `rerun`, each row as run_one's
+    JSON had it (empty fields dropped, numbers and `closed` typed)."""
+    kept = {}
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            if r["tool"] in rerun:
+                continue
+            row = {k: v for k, v in r.items() if v != ""}
+            row.update({k: float(row[k]) for k in _FLOATS if k in row})
+            row.update({k: int(row[k]) for k in _INTS if k in row})
+            if "closed" in row:
+                row["closed"] = row["closed"] == "True"
+            kept[(row["part"], row["tolerance"], row["tool"])] = row
+    return kept
 
 
 def _summary(rows: list[dict], tool: str) -> dict:
@@ -135,7 +162,9 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, compl
     lines = [f"# {'Solids built here' if args.built else f'Real parts outside the corpus: {args.package}'}", "",
              f"Made by `python bench/real_parts.py {source}"
              f"{'' if args.tools == 'amprep,occt-delabella' else f' --tools {args.tools} --name {args.name}'}"
-             f"{f' --sample {args.sample}' if args.sample else ''}`: {what} "
+             f"{f' --sample {args.sample}' if args.sample else ''}`"
+             f"{f' (then `--rerun {args.rerun}`: the other tools’ cells kept from the run before)' if args.rerun else ''}"
+             f": {what} "
              f"({n_parts} {'files' if args.built else 'parts'}{'' if complete else ', those a run stopped early had reached, from its log'}), "
              "converted end to end in a child process per cell by amprep (`amprep-quality`: `--mesher quality`) and by "
              "the bare OCCT pipeline (its reader, BRepMesh Delabella, StlAPI_Writer). `closed`: every edge of the "
