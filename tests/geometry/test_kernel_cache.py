@@ -51,4 +51,3 @@ def test_a_fresh_process_after_amprep_warm_compiles_no_kernel(tmp_path):
     dispatched = {name.rsplit(".", 2)[-2] for name in stats}
     assert dispatched == {"_bspline_kernel", "_chordal_kernel", "_angle_kernel", "_ring_kernel"}, stats
     assert all(hits > 0 and misses == 0 for hits, misses in stats.values()), json.dumps(stats, indent=0)
-
