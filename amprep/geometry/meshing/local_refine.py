@@ -210,7 +210,8 @@ SMOOTH_GAIN = np.pi / 3 * 0.01
 #: and at most this many sets of nodes that share no side, each moved at once, per round
 SMOOTH_SETS = 64
 #: a node whose move is under this × its shortest side stays where it is, its star not measured (the DTMB hull at
-#: 0.01 mm: 14 % less meshing time for a mean angle regularity 0.0004 lower; its tenth percentile of moves is 0.3–0.7 %)
+#: 0.01 mm: 14 % less meshing time for a mean angle regularity 0.0004 lower; the tenth percentile of its moves is
+#: 0.3–0.7 % of that side)
 SMOOTH_MIN_MOVE = 0.05
 
 
@@ -379,12 +380,13 @@ def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
 
 
 def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6) -> FacePatch:
-    """The quality mesher's finish of a face with no single scale to its (u,v) lengths: up to SMOOTH_ROUNDS rounds (until
-    one gains under SMOOTH_GAIN in the mean smallest angle) in which
-    every interior node, in sets no two of which share a side (_independent), is moved toward its neighbours' mean
-    in space (_toward_neighbours), unless that move is under SMOOTH_MIN_MOVE × its shortest side; a move is kept only where none of the node's triangles turns over in (u,v) or goes
-    over the tolerance and their smallest angle in space does not fall. Each node's triangles hold no other moving
-    node, so every decision is exact and final: no fold is made and every triangle stays within the tolerance."""
+    """The quality mesher's finish of a face with no single scale to its (u,v) lengths: up to SMOOTH_ROUNDS rounds
+    (until one gains under SMOOTH_GAIN in the mean smallest angle) in which every interior node, in sets no two of
+    which share a side (_independent), is moved toward its neighbours' mean in space (_toward_neighbours), unless that
+    move is under SMOOTH_MIN_MOVE × its shortest side; a move is kept only where none of the node's triangles turns
+    over in (u,v) or goes over the tolerance and their smallest angle in space does not fall. Each node's triangles
+    hold no other moving node, so every decision is exact and final: no fold is made and every triangle stays within
+    the tolerance."""
     if patch.uv is None or patch.error is None:
         return patch
     tris, uv, xyz, err = patch.tris, patch.uv.copy(), patch.nodes.copy(), patch.error.copy()
