@@ -322,15 +322,21 @@ def unfold(patch: FacePatch, surface: Surface, tolerance: float, order: int = 6)
     return flip_for_angles(patch, surface, tolerance, order, angles=False)
 
 
-def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: np.ndarray, ring: tuple[np.ndarray, ...],
-                       extent: np.ndarray) -> np.ndarray:
-    """(k, 2) the (u,v) of nodes idx (k,) moved SMOOTH_RELAX of the way to the mean of their neighbours in space (ring:
-    _rings' (start (n+1,), neighbour) of each node), the move d (3,) taken into (u,v) by least squares on the tangent
-    plane: J δ = d with J = [S_u S_v] (uv_cdt.surface_tangents, steps from the (u,v) `extent` (m, 2)); a node where J
-    is singular stays."""
+def _ring_members(idx: np.ndarray, ring: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(count (k,), owner (r,), pick (r,)): each node idx (k,)'s number of neighbours, and its neighbours (ring: _rings'
+    (start (n+1,), neighbour) of each node) one per row, pick[j] a neighbour of node idx[owner[j]]."""
     start, neighbour = ring
     count = start[idx + 1] - start[idx]
-    owner, pick = np.repeat(np.arange(len(idx)), count), neighbour[_ranges(start[idx], start[idx + 1])]
+    return count, np.repeat(np.arange(len(idx)), count), neighbour[_ranges(start[idx], start[idx + 1])]
+
+
+def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: np.ndarray,
+                       members: tuple[np.ndarray, ...], extent: np.ndarray) -> np.ndarray:
+    """(k, 2) the (u,v) of nodes idx (k,) moved SMOOTH_RELAX of the way to the mean of their neighbours in space
+    (members: _ring_members' of idx), the move d (3,) taken into (u,v) by least squares on the tangent plane: J δ = d
+    with J = [S_u S_v] (uv_cdt.surface_tangents, steps from the (u,v) `extent` (m, 2)); a node where J is singular
+    stays."""
+    count, owner, pick = members
     total = np.stack([np.bincount(owner, xyz[pick, j], len(idx)) for j in range(3)], axis=1)
     su, sv = surface_tangents(surface, uv[idx], xyz[idx], extent)
     d = total / np.maximum(count, 1)[:, None] - xyz[idx]
@@ -342,14 +348,11 @@ def _toward_neighbours(surface: Surface, uv: np.ndarray, xyz: np.ndarray, idx: n
     return uv[idx] + SMOOTH_RELAX * np.where(ok[:, None], step, 0.0)
 
 
-def _shortest_side(xyz: np.ndarray, idx: np.ndarray, ring: tuple[np.ndarray, ...]) -> np.ndarray:
-    """(k,) the shortest side in space from each node idx (k,) to its neighbours (ring: _rings')."""
-    start, neighbour = ring
-    count = start[idx + 1] - start[idx]
-    pick = neighbour[_ranges(start[idx], start[idx + 1])]
-    length = norms(xyz[pick] - np.repeat(xyz[idx], count, axis=0))
+def _shortest_side(xyz: np.ndarray, idx: np.ndarray, members: tuple[np.ndarray, ...]) -> np.ndarray:
+    """(k,) the shortest side in space from each node idx (k,) to its neighbours (members: _ring_members' of idx)."""
+    _, owner, pick = members
     shortest = np.full(len(idx), np.inf)
-    np.minimum.at(shortest, np.repeat(np.arange(len(idx)), count), length)
+    np.minimum.at(shortest, owner, norms(xyz[pick] - xyz[idx][owner]))
     return shortest
 
 
@@ -412,9 +415,10 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
                 break
             candidates &= ~movers
             idx = np.flatnonzero(movers)
-            to_uv = _toward_neighbours(surface, uv, xyz, idx, ring, patch.uv)
+            members = _ring_members(idx, ring)
+            to_uv = _toward_neighbours(surface, uv, xyz, idx, members, patch.uv)
             to_xyz = surface.evaluate(to_uv)
-            far = norms(to_xyz - xyz[idx]) >= SMOOTH_MIN_MOVE * _shortest_side(xyz, idx, ring)
+            far = norms(to_xyz - xyz[idx]) >= SMOOTH_MIN_MOVE * _shortest_side(xyz, idx, members)
             movers[idx[~far]] = False  # a move this small gains nothing a measure of its star would pay for
             idx, to_uv, to_xyz = idx[far], to_uv[far], to_xyz[far]
             if not len(idx):
