@@ -228,3 +228,31 @@ def test_thin_strips_get_one_long_edge_staggered_so_their_triangles_are_isoscele
     bar = mesh_model(model_from_shape(cq.Workplane().box(40, 4, 4).val().wrapped),
                      MeshParams(tolerance=0.34, mesher="quality")).mesh
     assert np.degrees(min_angles(bar.corners)).min() > 30 and check_mesh(bar).closed
+
+
+def test_boundary_loops_are_made_again_only_when_an_edge_changes(reference_solids):
+    """A face's loops are kept while its edges keep their params (the same arrays) and collapses; a cut edge, or an
+    edge's two ends made one node, makes them anew, and what is kept cannot be written to."""
+    from amprep.geometry.cad.topology import Topology, face_edges
+    from amprep.geometry.meshing.face_mesher import boundary_loops
+
+    model = model_from_shape(reference_solids["plate_with_holes"])
+    topo = Topology.of(model.shape)
+    face = max(model.faces, key=lambda f: len(face_edges(f)))  # the top, with its holes
+    first = boundary_loops(face, topo, 0.1, 0.5)
+    assert boundary_loops(face, topo, 0.1, 0.5) is first
+    with pytest.raises(ValueError):
+        first[0]["uv"][0, 0] = 1.0
+    edge = next(e for e in face_edges(face) if len(topo.edge_params[topo.edge_index(e)]) >= 2)
+    ei = topo.edge_index(edge)
+    params = topo.edge_params[ei]
+    topo.edge_params[ei] = np.sort(np.append(params, params[:2].mean()))
+    cut = boundary_loops(face, topo, 0.1, 0.5)
+    assert cut is not first
+    assert sum(len(lp["uv"]) for lp in cut) == sum(len(lp["uv"]) for lp in first) + 1
+    topo.edge_params[ei] = params.copy()  # equal values, another array: made again, the same as before
+    again = boundary_loops(face, topo, 0.1, 0.5)
+    assert again is not cut and all(np.array_equal(a["uv"], b["uv"]) for a, b in zip(again, first, strict=True))
+    _, v1, _, v2, _, _ = topo.edge_facts(edge)
+    topo.merge_vertices(v1, v2)
+    assert boundary_loops(face, topo, 0.1, 0.5) is not again

@@ -56,6 +56,8 @@ class Topology:
     _facts: dict[int, tuple[int, int, float, int, float, bool]] = field(default_factory=dict, repr=False)
     _areas: dict[TopoDS_Face, float] = field(default_factory=dict, repr=False)
     _lengths: dict[int, tuple[np.ndarray, float]] = field(default_factory=dict, repr=False)  # shared_edges.edge_length
+    #: face_mesher.boundary_loops of each face, with what they were made from (its edges' params, which collapsed)
+    loops: dict[TopoDS_Face, tuple[tuple, list]] = field(default_factory=dict, repr=False)  # type: ignore[type-arg]
 
     def merge_vertices(self, a: int, b: int) -> None:
         """Record that the mesher collapsed an edge: its two end vertices become one mesh vertex."""

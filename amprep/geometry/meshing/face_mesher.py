@@ -80,9 +80,13 @@ def wire_edges(face: TopoDS_Face, wire) -> list[TopoDS_Edge]:  # type: ignore[no
 def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular: float) -> list[dict]:  # type: ignore[type-arg]
     """Each wire of the face as a closed polygon in (u,v): uv (n, 2), vertex (n,), edge (n,), param (n,), segment
     (n,) the B-rep edge of the segment from each node to the next and span (n, 2) its parameters there at both ends;
-    an edge with no discretisation yet gets one."""
+    an edge with no discretisation yet gets one. Read-only arrays, made once while the face's edges keep the same
+    params arrays and collapses (kept in topo.loops: the quality mesher's plan and its meshing ask for them both)."""
+    known = topo.loops.get(face)
+    if known is not None and _same_edges(topo, known[0]):
+        return known[1]  # type: ignore[no-any-return]
     discretize_missing_edges(face, topo, tolerance, angular)
-    loops = []
+    loops, made_of = [], []
     for wire in explore(face, TopAbs_WIRE, TopoDS.Wire_s):
         uvs, verts, edges, pars, segs, spans = [], [], [], [], [], []
         for edge in wire_edges(face, wire):
@@ -95,6 +99,7 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
             if pcurve is None:
                 raise AmprepError(ErrorCode.MESHING_FAILED, "an edge of face has no curve on its surface")
             v1, p1, v2, p2 = topo.edge_ends(edge)
+            made_of.append((ei, topo.edge_params[ei], v1, v2, topo.root(v1) == topo.root(v2)))
             if not degenerate and v1 != v2 and topo.root(v1) == topo.root(v2) and len(params) == 2:
                 continue  # an edge collapse_short_edges collapsed: its two ends are one node, the next edge's
             n = len(params) - 1  # the last point starts the next edge
@@ -111,7 +116,17 @@ def boundary_loops(face: TopoDS_Face, topo: Topology, tolerance: float, angular:
         if uvs:
             loops.append(dict(uv=np.concatenate(uvs), vertex=np.concatenate(verts), edge=np.concatenate(edges),
                               param=np.concatenate(pars), segment=np.concatenate(segs), span=np.concatenate(spans)))
+    for arr in (a for lp in loops for a in lp.values()):
+        arr.flags.writeable = False
+    topo.loops[face] = (tuple(made_of), loops)
     return loops
+
+
+def _same_edges(topo: Topology, made_of: tuple) -> bool:  # type: ignore[type-arg]
+    """True when every edge boundary_loops met (edge index, its params, its ends, whether they were one node) has those
+    same params (the same array) and collapses now."""
+    return all(topo.edge_params.get(ei) is params and (topo.root(v1) == topo.root(v2)) == joined
+               for ei, params, v1, v2, joined in made_of)
 
 
 def mesh_face(face_id: int, face: TopoDS_Face, topo: Topology, surface: Surface, tolerance: float,
