@@ -5,7 +5,7 @@ Prints a table and writes docs/bench_convert.md and docs/bench_convert.csv.
 
     python bench/convert.py                   # test parts at 0.1/0.01/0.001, corpus at 0.1/0.01 (+0.001 if small)
     python bench/convert.py --quick           # 0.1 and 0.01 on the test parts and the small corpus parts
-    python bench/convert.py --acis --name bench_convert_acis   # the ACIS corpus (SAT, SAB, DXF), amprep only
+    python bench/convert.py --acis --tools amprep,amprep-quality --name bench_convert_acis   # the ACIS corpus, amprep only
     python bench/convert.py --tools amprep,amprep-quality,occt-delabella,occt-watson --only torus_R20,sphere_r12 \
         --tolerances 0.01,0.001 --name bench_convert_quality     # the quality mesher beside the default and OCCT
 """
@@ -277,8 +277,8 @@ def main() -> None:
     ap.add_argument("--from-log", help="comma-separated files of the JSON lines runs printed: write the tables from them "
                     "(a cell in a later file replaces the same part, tolerance and tool of an earlier one)")
     ap.add_argument("--made-by", default="", help="with --from-log: the commands that made the logs, for the docs")
-    ap.add_argument("--acis", action="store_true", help="the ACIS corpus (sat/: SAT, SAB, DXF) instead: amprep only, "
-                    "no other tool reads ACIS")
+    ap.add_argument("--acis", action="store_true", help="the ACIS corpus (sat/: SAT, SAB, DXF) instead: amprep's "
+                    "meshers only (those of --tools, else the default), no other tool reads ACIS")
     ap.add_argument("--tolerances", default="", help="comma-separated mm, instead of 0.1, 0.01 (and 0.001 on small parts)")
     args = ap.parse_args()
     if args.child:
@@ -301,7 +301,7 @@ def main() -> None:
         return
     tools = args.tools.split(",")
     if args.acis:
-        parts, tools = sorted((CORPUS / "sat").glob("*")), ["amprep"]
+        parts, tools = sorted((CORPUS / "sat").glob("*")), [t for t in tools if t.startswith("amprep")] or ["amprep"]
     else:
         parts = test_parts(Path(args.parts), args.only) + sorted(p for p in CORPUS.glob("*") if p.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep"))
     parts = [p for p in parts if _wanted(p.name, args.only)]
