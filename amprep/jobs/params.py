@@ -86,7 +86,10 @@ def _meshing(tolerance: float, help_tolerance: str) -> tuple[Param, ...]:
         Param("relative", "float", None, "Tolerance as a fraction of the bounding-box diagonal (replaces tolerance; "
               f"the result must be at least {MIN_TOLERANCE:g} mm)", ge=1e-6, lt=1, optional=True),
         Param("angular", "float", 0.5, "Largest angle one segment of a curved edge turns through", "rad", gt=0, le=1.57),
-        Param("min_size", "float", 0.0, "Smallest triangle edge (0: tolerance/10)", "mm", ge=0, le=100),
+        Param("min_size", "float", 0.0, "Shortest edge the meshers aim for. occt: BRepMesh's smallest triangle edge "
+              "(0: tolerance/10); quality: the size it cuts boundary edges to, to follow a narrow face's width, is at least "
+              "this (0: the tolerance), so thin walls and strips get fewer, thinner triangles. The chord tolerance "
+              "still cuts finer wherever it must", "mm", ge=0, le=100),
         Param("algorithm", "choice", "delabella", "OCCT mesh algorithm", choices=("delabella", "watson")),
         Param("mesher", "choice", "occt", "occt: OCCT's BRepMesh, mended by ours where it breaks the tolerance; "
               "quality: every face by ours (seed 000: planes by constrained Delaunay to a 30° minimum angle, curved "

@@ -303,6 +303,29 @@ def test_graded_edges_stay_shared_by_both_faces(reference_solids):
     assert lengths.max() < 100 / 4, "the 100 mm edges were not cut for the chamfers beside them"
 
 
+def test_min_size_stops_the_quality_mesher_cutting_edges_to_a_thin_wall():
+    """A 0.5 mm wall 100 mm long: its long edges are cut to its width (segments under 1 mm), unless min_size sets the
+    size they are cut to at 4 mm (equal cuts of a longer segment, then the strip's staggered end segments halved: at
+    least 1 mm); either way closed and within the tolerance, which still cuts the rounded ends' edges."""
+    import cadquery as cq
+
+    wall = cq.Workplane().box(100, 0.5, 20).edges("|Y").fillet(0.2).val().wrapped
+    model = model_from_shape(wall)
+    fine, coarse = (mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", min_size=m)) for m in (0.0, 4.0))
+    for r in (fine, coarse):
+        _closed_solid(r.mesh)
+        assert r.within_tolerance
+
+    def long_sides(mesh) -> np.ndarray:  # the sides along x on the wall's long straight edges (y = ±0.25, z = ±10)
+        a, b = mesh.corners, np.roll(mesh.corners, -1, axis=1)
+        on = (np.abs(np.abs(a[..., 1]) - 0.25) < 1e-9) & (np.abs(np.abs(a[..., 2]) - 10) < 1e-9)
+        along = on & (np.abs(b[..., 1] - a[..., 1]) < 1e-9) & (np.abs(b[..., 2] - a[..., 2]) < 1e-9)
+        return np.abs(b[..., 0] - a[..., 0])[along]
+
+    assert long_sides(fine.mesh).max() < 1.0 <= long_sides(coarse.mesh).min()
+    assert coarse.mesh.n_triangles < fine.mesh.n_triangles / 2
+
+
 def test_the_triangle_limit_is_kept_while_meshing_not_only_estimated(monkeypatch):
     """The quality mesher can outgrow its estimates (forced here: its faces estimated at none): the limit is checked
     on its planned rows before they are made, and on the mesh as it is made (with no lattice planned)."""

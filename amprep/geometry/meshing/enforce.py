@@ -273,7 +273,7 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
     faces = [f.model.faces[i] for i in remesh]
     collapse_short_edges(faces, f.topo, MIN_SPACING * f.tol)
     bare_straight_edges(faces, f.topo, lambda ei: _faces_all(f, ei, LINES_STAY_LINES))
-    grade_edges(faces, [f.surfaces[i] for i in remesh], f.topo, f.tol, target)  # type: ignore[misc]
+    grade_edges(faces, [f.surfaces[i] for i in remesh], f.topo, f.tol, target, f.params.min_size)  # type: ignore[misc]
     stagger_strips(faces, [f.surfaces[i] for i in remesh], f.topo, lambda ei: _faces_all(f, ei, ("plane",)))  # type: ignore[misc]
     loops = [_loops_to_plan(face, f.topo, target, f.params.angular) for face in faces]
     planned = plan_lattices(faces, [f.surfaces[i] for i in remesh], loops, f.topo,  # type: ignore[misc]

@@ -15,8 +15,9 @@ MESHERS = ("occt", "quality")
 @dataclass(frozen=True)
 class MeshParams:
     """Meshing parameters: `tolerance` mm (absolute chord deviation) or `relative` (fraction of the bounding-box
-    diagonal, overrides tolerance), `angular` rad (the largest turn of one edge segment), `min_size` mm, `algorithm`
-    delabella | watson, `max_triangles` the most the output may have by the estimate made before meshing."""
+    diagonal, overrides tolerance), `angular` rad (the largest turn of one edge segment), `min_size` mm (BRepMesh's
+    smallest edge; the quality mesher's floor for cutting edges to its faces' widths, never for the tolerance),
+    `algorithm` delabella | watson, `max_triangles` the most the output may have by the estimate made before meshing."""
 
     tolerance: float = 0.1
     relative: float | None = None

@@ -252,14 +252,16 @@ def split_segments(params: np.ndarray, parts: np.ndarray) -> np.ndarray:
 
 
 def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topology, floor: float = 0.0,
-                target: float = 0.0) -> None:
+                target: float = 0.0, shortest: float = 0.0) -> None:
     """Cut the discretised edges of `faces` (on `surfaces`; their params in topo.edge_params) where a
     segment is longer than GRADE × the narrower width of the faces it bounds, or than GROWTH × its distance from the
     nearer end plus the shortest segment at that end's vertex (over every edge there): a long segment beside a
     short one can only make slivers, so sizes grow along an edge from its ends (twice: the first cuts shorten the ends;
     not on a straight edge of a free-form face); and, with a `target`, than a triangle of a curved face it bounds
     can stand on within it (bend_sizes; not on such a straight edge). No size is set
-    below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment)."""
+    below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment), and none for
+    the widths or the growth below `shortest` (the user's min_size: fewer, thinner triangles on thin walls)."""
+    wide = max(floor, shortest)
     cap: dict[int, tuple[float, object]] = {}
     bent: dict[int, list[tuple[TopoDS_Face, Surface]]] = {}
     straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face, or of one
@@ -279,7 +281,7 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
             if (kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei])
                     and (pole or _curved_in_uv(edge, face, topo.edge_params[ei]))):
                 straight.add(ei)
-            limit = GRADE * w if w >= floor else min(GRADE * floor, NEEDLE * w)
+            limit = GRADE * w if w >= wide else min(GRADE * wide, NEEDLE * w)
             if ei in topo.edge_params and (ei not in cap or limit < cap[ei][0]):
                 cap[ei] = (limit, edge)
             if target > 0 and kind != "plane":
@@ -312,7 +314,7 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
                 size = np.full_like(seg, np.inf)
             if np.isfinite(limit) and limit > 0:
                 size = np.minimum(size, limit)
-            parts = np.ceil(seg / np.maximum(size, max(floor, 1e-12)))
+            parts = np.ceil(seg / np.maximum(size, max(wide, 1e-12)))
             if ei in bends:  # a segment a little over keeps its target (ROOM): not halved
                 bend = np.maximum(bends[ei], floor)
                 parts = np.maximum(parts, np.ceil(seg / np.maximum(bend, 1e-12) - BEND_SLACK))
