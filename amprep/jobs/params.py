@@ -87,24 +87,25 @@ def _meshing(tolerance: float, help_tolerance: str) -> tuple[Param, ...]:
               f"the result must be at least {MIN_TOLERANCE:g} mm)", ge=1e-6, lt=1, optional=True),
         Param("angular", "float", 0.5, "Largest angle one segment of a curved edge turns through", "rad", gt=0, le=1.57),
         Param("min_size", "float", 0.0, "Shortest edge the meshers aim for. occt: BRepMesh's smallest triangle edge "
-              "(0: tolerance/10); quality: the size it cuts boundary edges to, to follow a narrow face's width, is at least "
-              "this (0: the tolerance), so thin walls and strips get fewer, thinner triangles. The chord tolerance "
-              "still cuts finer wherever it must", "mm", ge=0, le=100),
-        Param("algorithm", "choice", "delabella", "OCCT mesh algorithm", choices=("delabella", "watson")),
+              "(0: tolerance/10); quality: the size it cuts boundary edges to, to follow a narrow face's width, is "
+              "at least this (0: the tolerance), so thin walls and strips get fewer, thinner triangles. The chord "
+              "tolerance still cuts finer wherever it must", "mm", ge=0, le=100),
+        Param("algorithm", "choice", "delabella", "OCCT mesh algorithm (mesher occt)", choices=("delabella", "watson")),
         Param("mesher", "choice", "occt", "occt: OCCT's BRepMesh, mended by ours where it breaks the tolerance; "
               "quality: every face by ours (seed 000: planes by constrained Delaunay to a 30° minimum angle, curved "
               "faces from a (u,v) grid cut near square on the surface, boundary segments graded to the faces' "
               "width): triangles a finite-element or smoothing user would accept, 2-4× as many at a coarse "
               "tolerance (docs/meshing.md)", choices=("occt", "quality")),
-        Param("occt_edges", "bool", False, "Discretise every B-rep edge as OCCT's BRepMesh does, at half the tolerance "
-              "and half the angle (more triangles); off: at 0.95× the tolerance where only ruled faces meet (planes, "
-              "cylinders, cones, extrusions)"),
+        Param("occt_edges", "bool", False, "Mesher occt: discretise every B-rep edge as OCCT's BRepMesh does, at half "
+              "the tolerance and half the angle (more triangles); off: at 0.95× the tolerance where only ruled faces "
+              "meet (planes, cylinders, cones, extrusions)"),
         Param("max_triangles", "int", DEFAULT_MAX_TRIANGLES, "Refuse (output_too_large) a job whose output is "
               "predicted to have more triangles than this: for CAD, estimated from the B-rep before meshing (the "
               "quality mesher's from its edges and the faces' curvature, before any face is meshed) and kept as "
               "the mesh is made; for refine, the refinement's own size", ge=1, le=MAX_TRIANGLES_CAP),
-        Param("own_large_faces", "bool", True, "Mesh torus faces expected to need 20,000 triangles or more ourselves "
-              "from curvature-sized points (faster than OCCT, fewer triangles); off leaves every face to OCCT's BRepMesh"),
+        Param("own_large_faces", "bool", True, "Mesher occt: mesh torus faces expected to need 20,000 triangles or "
+              "more ourselves from curvature-sized points (faster than OCCT, fewer triangles); off leaves every face "
+              "to OCCT's BRepMesh"),
     )
 
 
