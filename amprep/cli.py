@@ -98,6 +98,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
         line = f"{args.output}: {c.triangles:,} triangles, {state}, {written['bytes']:,} bytes"
         if m is not None:
             line += f"; max chordal error {m.max_error:.4g} mm (tolerance {m.tolerance:.4g} mm)"
+        line += f"; mean angle regularity {result.regularity['angle']['mean']:.3f}"
         units = result.input.get("units")
         if units and units != "mm":
             line += f"; file unit {units}, written in mm"

@@ -22,6 +22,7 @@ from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import ProgressFn
 from amprep.geometry.io.stl import read_stl
 from amprep.geometry.io.write import write_mesh
+from amprep.geometry.measure.regularity import regularity, summarize
 from amprep.geometry.measure.report import mesh_section
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import MeshResult, mesh_file
@@ -43,6 +44,7 @@ class ConvertResult:
     float32_degenerate: int = 0  # triangles degenerate only after rounding to the file's float32 coordinates
     float32_joined: int = 0  # vertices that share their float32 position with another (solids that touch)
     nonmanifold_by_position: int = 0  # non-manifold edges once vertices are joined by their float32 position
+    regularity: dict[str, Any] = field(default_factory=dict)  # paper 000's measures: {angle, area, edge: {mean, bins}}
 
     @property
     def closed_by_position(self) -> bool:
@@ -58,6 +60,7 @@ class ConvertResult:
             "mesh": mesh_section(self.mesh, c, self.manifold3d)
             .with_extra(float32_degenerate_triangles=self.float32_degenerate)
             .with_position(self.float32_joined, self.nonmanifold_by_position).to_json(),
+            "regularity": self.regularity,
             "provenance": self.provenance,
             "notes": self.notes,
         }
@@ -88,11 +91,13 @@ MOVE_OVER_GAP = 4.0
 FORK_CHECKS_MIN = 100_000
 
 
-def output_checks(mesh: Mesh) -> tuple[MeshChecks, int, tuple[int, int]]:
-    """(check_mesh, float32_degenerate_count, float32_joined) of a mesh."""
+def output_checks(mesh: Mesh) -> tuple[MeshChecks, int, tuple[int, int], dict[str, Any]]:
+    """(check_mesh, float32_degenerate_count, float32_joined, the regularity summary: mean and paper bins of each
+    measure) of a mesh."""
     degenerate = np.zeros(mesh.n_triangles, bool)
     checks = check_mesh(mesh, degenerate)
-    return checks, float32_degenerate_count(mesh, degenerate), float32_joined(mesh, checks.nonmanifold_edges)
+    return (checks, float32_degenerate_count(mesh, degenerate), float32_joined(mesh, checks.nonmanifold_edges),
+            summarize(regularity(mesh.corners)).as_dict())
 
 
 def convert(path: str | Path, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> ConvertResult:
@@ -133,9 +138,9 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
     own = Forked(output_checks, mesh, fork=mesh.n_triangles >= FORK_CHECKS_MIN)
     ok3d = manifold3d_accepts(mesh)
     try:
-        checks, rounded, (joined, by_position) = own.result()
+        checks, rounded, (joined, by_position), quality = own.result()
     except AmprepError:  # the child died: check here
-        checks, rounded, (joined, by_position) = output_checks(mesh)
+        checks, rounded, (joined, by_position), quality = output_checks(mesh)
     if by_position > checks.nonmanifold_edges:
         notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch): a "
                      f"reader that joins an STL's vertices by position sees {by_position} non-manifold edges (a 3MF "
@@ -146,7 +151,7 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
     if not checks.closed:
         notes.append(f"the mesh is open: {checks.boundary_edges} boundary and {checks.nonmanifold_edges} non-manifold edges")
     return ConvertResult(mesh, info, checks, ok3d, meshing, provenance(params if meshing else None), notes, rounded,
-                         joined, by_position)
+                         joined, by_position, quality)
 
 
 def header_text(result: ConvertResult) -> str:

@@ -575,3 +575,29 @@ def test_the_quality_mesher_keeps_the_triangles_a_tessellated_only_face_stores()
     quality, default = (mesh_model(model, MeshParams(tolerance=0.1, mesher=m)).mesh for m in ("quality", "occt"))
     assert quality.n_triangles == default.n_triangles > 3000
     assert np.array_equal(np.sort(quality.corners.reshape(-1, 3), axis=0), np.sort(default.corners.reshape(-1, 3), axis=0))
+
+
+@pytest.mark.parametrize("mesher", ["occt", "quality"])
+def test_convert_reports_the_papers_regularity_of_what_it_wrote(reference_solids, mesher, tmp_path):
+    """The convert summary's `regularity` (paper 000's measures: mean and the four bins) agrees with the angles by the
+    law of cosines and the side ratios of the triangles parsed from the binary STL by numpy alone; the quality mesher's
+    angle mean is over 0.6."""
+    from amprep.geometry.io.stl import write_stl
+    from amprep.jobs.convert import convert
+
+    path = tmp_path / "part.stl"  # STL passthrough: the summary is of the triangles as read
+    write_stl(mesh_model(model_from_shape(reference_solids["filleted_block"]),
+                         MeshParams(tolerance=0.05, mesher=mesher)).mesh, path)
+    r = convert(path).summary()["regularity"]
+    record = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
+    corners = np.frombuffer(path.read_bytes(), record, offset=84)["corners"].astype(float)
+    a, b, c = (np.linalg.norm(corners[:, (k + 1) % 3] - corners[:, (k + 2) % 3], axis=1) for k in range(3))
+    smallest = np.arccos(np.clip((b * b + c * c - a * a) / (2 * b * c), -1, 1))  # the angle opposite the shortest side
+    for x, y, z in ((c, a, b), (a, b, c)):
+        smallest = np.minimum(smallest, np.arccos(np.clip((x * x + y * y - z * z) / (2 * x * y), -1, 1)))
+    sides = np.stack([a, b, c], axis=1)
+    for name, q in (("angle", smallest / (np.pi / 3)), ("edge", sides.min(axis=1) / sides.max(axis=1))):
+        assert r[name]["mean"] == pytest.approx(q.mean(), abs=1e-6)
+        assert r[name]["bins"] == np.histogram(np.clip(q, 0, 1), [0, 0.005, 0.4, 0.8, 1.0 + 1e-12])[0].tolist()
+    if mesher == "quality":
+        assert r["angle"]["mean"] > 0.6
