@@ -22,7 +22,7 @@ from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.progress import ProgressFn
 from amprep.geometry.io.stl import read_stl
 from amprep.geometry.io.write import write_mesh
-from amprep.geometry.measure.regularity import regularity, summarize
+from amprep.geometry.measure.regularity import regularity_at, summarize
 from amprep.geometry.measure.report import mesh_section
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import MeshResult, mesh_file
@@ -91,13 +91,11 @@ MOVE_OVER_GAP = 4.0
 FORK_CHECKS_MIN = 100_000
 
 
-def output_checks(mesh: Mesh) -> tuple[MeshChecks, int, tuple[int, int], dict[str, Any]]:
-    """(check_mesh, float32_degenerate_count, float32_joined, the regularity summary: mean and paper bins of each
-    measure) of a mesh."""
+def output_checks(mesh: Mesh) -> tuple[MeshChecks, int, tuple[int, int]]:
+    """(check_mesh, float32_degenerate_count, float32_joined) of a mesh."""
     degenerate = np.zeros(mesh.n_triangles, bool)
     checks = check_mesh(mesh, degenerate)
-    return (checks, float32_degenerate_count(mesh, degenerate), float32_joined(mesh, checks.nonmanifold_edges),
-            summarize(regularity(mesh.corners)).as_dict())
+    return checks, float32_degenerate_count(mesh, degenerate), float32_joined(mesh, checks.nonmanifold_edges)
 
 
 def convert(path: str | Path, params: MeshParams = MeshParams(), progress: ProgressFn | None = None) -> ConvertResult:
@@ -137,10 +135,11 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
     # our own checks in a forked child while manifold3d (which holds the GIL) runs here
     own = Forked(output_checks, mesh, fork=mesh.n_triangles >= FORK_CHECKS_MIN)
     ok3d = manifold3d_accepts(mesh)
+    quality = summarize(regularity_at(mesh.vertices, mesh.triangles)).as_dict()  # here: the child's checks take longer
     try:
-        checks, rounded, (joined, by_position), quality = own.result()
+        checks, rounded, (joined, by_position) = own.result()
     except AmprepError:  # the child died: check here
-        checks, rounded, (joined, by_position), quality = output_checks(mesh)
+        checks, rounded, (joined, by_position) = output_checks(mesh)
     if by_position > checks.nonmanifold_edges:
         notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch): a "
                      f"reader that joins an STL's vertices by position sees {by_position} non-manifold edges (a 3MF "

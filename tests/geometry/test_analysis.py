@@ -14,7 +14,7 @@ from amprep.geometry.measure import cusp
 from amprep.geometry.measure.analysis import AnalysisParams, analyze_mesh, face_chordal_errors
 from amprep.geometry.measure.cylindricity import minimum_zone
 from amprep.geometry.measure.defects import boundary_loops, nonmanifold_vertices, self_intersections
-from amprep.geometry.measure.regularity import bin_counts, regularity, summarize
+from amprep.geometry.measure.regularity import MEASURES, bin_counts, regularity, summarize
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 from amprep.jobs.analyze import analyze_file
@@ -323,3 +323,18 @@ def test_box_cusp_spatial_hash_misses_no_point(reference_solids):
     assert np.isfinite(ref).sum() > 100
     assert np.array_equal(np.isnan(ref), np.isnan(res.height))
     assert np.allclose(ref[np.isfinite(ref)], res.height[np.isfinite(ref)], atol=1e-12)
+
+
+def test_regularity_over_indexed_triangles_gives_the_same_bits(reference_solids):
+    """regularity_at (no (m, 3, 3) gather) equals regularity of the gathered corners bit for bit, on a real mesh and on
+    the degenerate cases: a point triangle, a flat one, a repeated corner."""
+    from amprep.geometry.measure.regularity import regularity_at
+
+    mesh = mesh_model(model_from_shape(reference_solids["bspline_loft"]), MeshParams(tolerance=0.01, mesher="quality")).mesh
+    xyz = np.concatenate([mesh.vertices, [[0, 0, 0], [1, 0, 0], [2, 0, 0]]])
+    n = len(mesh.vertices)
+    tris = np.concatenate([mesh.triangles, [[n, n, n], [n, n + 1, n + 2], [n, n + 1, n]]])
+    at, gathered = regularity_at(xyz, tris), regularity(xyz[tris])
+    for k in MEASURES:
+        assert np.array_equal(at[k], gathered[k]), k
+    assert at["angle"][-3:].tolist() == [0, 0, 0] and at["area"][-3:].tolist() == [0, 0, 0]

@@ -204,6 +204,8 @@ def test_convert_summary_on_the_job_page(page, service: Service, touching_step: 
     assert summary["mesh"]["closed_by_position"] is False and summary["mesh"]["watertight"] is True
     assert float(cell("tolerance (mm)")) == 0.05
     assert float(cell("max chordal error (mm)")) <= 0.05 and cell("within tolerance") == "true"
+    mean = page.locator("#report tr", has=page.locator("th", has_text="angle regularity")).first.locator("td").first
+    assert float(mean.inner_text()) == pytest.approx(summary["regularity"]["angle"]["mean"], abs=5e-4)
     notes = page.locator("#report li").all_inner_texts()
     assert any("float32 position" in n for n in notes) and notes == summary["notes"]
 

@@ -25,7 +25,7 @@ from amprep.geometry.measure.defects import (
     nonmanifold_vertices,
     self_intersections,
 )
-from amprep.geometry.measure.regularity import MEASURES, regularity, summarize
+from amprep.geometry.measure.regularity import MEASURES, regularity_at, summarize
 from amprep.geometry.measure.report import (
     SCHEMA,
     FaceScore,
@@ -171,7 +171,7 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
         "locations": defect_locations(mesh, inc, params.location_cap),
     })
     prog("regularity", 0.35)
-    q = regularity(mesh.corners)
+    q = regularity_at(mesh.vertices, mesh.triangles)
     summary = summarize(q)
     prog("chordal error", 0.4)
     with compiled(worth_compiling(mesh.n_triangles, params.sample_order)):  # decided by the mesh, not by timing

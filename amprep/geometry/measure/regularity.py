@@ -50,6 +50,30 @@ def regularity(corners: np.ndarray) -> dict[str, np.ndarray]:
     return {"angle": np.clip(q_angle, 0, 1), "area": np.clip(q_area, 0, 1), "edge": np.clip(q_edge, 0, 1)}
 
 
+def regularity_at(xyz: np.ndarray, tris: np.ndarray) -> dict[str, np.ndarray]:
+    """regularity of the triangles tris (m, 3) over nodes xyz (n, 3), the same bits as regularity(xyz[tris]) (the
+    same formulas in the same order: side k from corner k to k+1, min_angles' corner opposite the shortest side) in
+    half its time: no (m, 3, 3) gather and no rolled copy, each side made once for all three measures."""
+    p0, p1, p2 = xyz[tris[:, 0]], xyz[tris[:, 1]], xyz[tris[:, 2]]
+    sides = np.empty((len(tris), 3, 3))
+    np.subtract(p1, p0, out=sides[:, 0])
+    np.subtract(p2, p1, out=sides[:, 1])
+    np.subtract(p0, p2, out=sides[:, 2])
+    sq_side = dot(sides, sides)
+    lengths = np.sqrt(sq_side)
+    sq = (lengths**2).sum(axis=1)
+    area = 0.5 * norms(cross(sides[:, 0], p2 - p0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q_area = np.where(sq > 0, 4 * np.sqrt(3) * area / sq, 0.0)
+        lmax = lengths.max(axis=1)
+        q_edge = np.where(lmax > 0, lengths.min(axis=1) / lmax, 0.0)
+    k = sq_side.argmin(axis=1)
+    rows = np.arange(len(tris))
+    a, b = sides[rows, (k + 2) % 3], -sides[rows, (k + 1) % 3]
+    q_angle = np.degrees(angles_from(norms(cross(a, b)), dot(a, b), sq_side[rows, k] > 0)) / 60.0
+    return {"angle": np.clip(q_angle, 0, 1), "area": np.clip(q_area, 0, 1), "edge": np.clip(q_edge, 0, 1)}
+
+
 @dataclass(frozen=True)
 class RegularitySummary:
     """Mean and the four bin counts of each measure."""
