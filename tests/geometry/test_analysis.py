@@ -325,9 +325,10 @@ def test_box_cusp_spatial_hash_misses_no_point(reference_solids):
     assert np.allclose(ref[np.isfinite(ref)], res.height[np.isfinite(ref)], atol=1e-12)
 
 
-def test_regularity_over_indexed_triangles_gives_the_same_bits(reference_solids):
+def test_regularity_over_indexed_triangles_gives_the_same_bits(reference_solids, monkeypatch):
     """regularity_at (no (m, 3, 3) gather) equals regularity of the gathered corners bit for bit, on a real mesh and on
     the degenerate cases: a point triangle, a flat one, a repeated corner."""
+    from amprep.geometry.measure import regularity as regularity_module
     from amprep.geometry.measure.regularity import regularity_at
 
     mesh = mesh_model(model_from_shape(reference_solids["bspline_loft"]), MeshParams(tolerance=0.01, mesher="quality")).mesh
@@ -337,4 +338,7 @@ def test_regularity_over_indexed_triangles_gives_the_same_bits(reference_solids)
     at, gathered = regularity_at(xyz, tris), regularity(xyz[tris])
     for k in MEASURES:
         assert np.array_equal(at[k], gathered[k]), k
+    monkeypatch.setattr(regularity_module, "CHUNK", 1000)  # in pieces: the same bits
+    pieces = regularity_at(xyz, tris)
+    assert len(tris) > 3000 and all(np.array_equal(pieces[k], at[k]) for k in MEASURES)
     assert at["angle"][-3:].tolist() == [0, 0, 0] and at["area"][-3:].tolist() == [0, 0, 0]
