@@ -15,6 +15,7 @@ from scipy.spatial import ConvexHull
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.read import read_cad
+from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.formats import sniff_path
 from amprep.geometry.meshing.params import MeshParams
 from amprep.jobs.convert import convert
@@ -119,10 +120,8 @@ def test_acis_sheets_convert_open_and_say_so(name, sheets):
 
 def _open_length(mesh) -> float:
     """Σ the lengths of the sides one triangle alone holds."""
-    t = mesh.triangles
-    sides = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
-    unique, count = np.unique(sides, axis=0, return_counts=True)
-    open_ = unique[count == 1]
+    inc = edge_incidence(mesh.triangles)
+    open_ = inc.edges[inc.count == 1]
     return float(np.linalg.norm(mesh.vertices[open_[:, 0]] - mesh.vertices[open_[:, 1]], axis=1).sum())
 
 
