@@ -41,6 +41,35 @@ def test_faces_meshed_in_worker_processes_equal_the_serial_mesh(monkeypatch):
 
 
 @pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
+def test_the_quality_meshers_plan_made_side_by_side_equals_the_serial_plan(monkeypatch):
+    """The quality mesher's planning forks for the faces' areas (Topology.measure_areas) and the edges' standing
+    sizes (shared_edges.bend_sizes_many, one surface per task): forced to fork for both, OCCT's sample part at 0.1 mm comes out bit for bit as with no fork at all."""
+    from amprep.geometry.cad import topology
+    from amprep.geometry.meshing import shared_edges, uv_seed
+
+    load_kernels()
+    model = read_cad(corpus("occt_top_invalid.brep"))
+    forked: list[str] = []
+    real = face_pool.Forked
+
+    def counting(*args, **kwargs):
+        forked.append(args[1].__qualname__)  # Forked(_work, fn, ...): the task each child runs
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(face_pool, "Forked", counting)
+    monkeypatch.setattr(topology, "AREAS_PARALLEL_MIN", 0.0)
+    monkeypatch.setattr(shared_edges, "BEND_PARALLEL_MIN", 0.0)
+    pooled = mesh_model(model, MeshParams(tolerance=0.1, mesher="quality"))
+    assert any("measure_areas" in q for q in forked) and any("bend_sizes_many" in q for q in forked), forked
+    monkeypatch.setattr(face_pool, "can_fork", lambda: False)
+    uv_seed.BOUNDED_MEDIANS.clear()
+    serial = mesh_model(read_cad(corpus("occt_top_invalid.brep")), MeshParams(tolerance=0.1, mesher="quality"))
+    assert np.array_equal(pooled.mesh.vertices, serial.mesh.vertices)
+    assert np.array_equal(pooled.mesh.triangles, serial.mesh.triangles)
+    assert np.array_equal(pooled.face_error, serial.face_error, equal_nan=True)
+
+
+@pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
 def test_a_worker_that_dies_is_a_meshing_error_not_a_hang():
     parent = os.getpid()
 

@@ -14,6 +14,11 @@ from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
+from amprep.geometry.parallel.face_pool import map_faces
+
+#: measure_areas forks where its faces cost this much (one free-form face's integral ≈ 1: about a millisecond)
+AREAS_PARALLEL_MIN = 100.0
+
 
 def trsf_matrix(loc: TopLoc_Location) -> np.ndarray | None:
     """(3, 4) affine matrix of a location, or None for the identity."""
@@ -109,10 +114,25 @@ class Topology:
         """|∫∫ dA| of a face (OCCT's surface integral), asked of OCCT once per face (a cache on the topology)."""
         known = self._areas.get(face)
         if known is None:
-            props = GProp_GProps()
-            BRepGProp.SurfaceProperties_s(face, props)
-            known = self._areas[face] = abs(props.Mass())
+            known = self._areas[face] = _area(face)
         return known
+
+    def measure_areas(self, faces: list[TopoDS_Face], cost: list[float]) -> None:
+        """face_area of each of `faces` not yet known, computed side by side (face_pool.map_faces, costliest first by
+        `cost`, one per face: the same integral in any process) where they cost AREAS_PARALLEL_MIN or more."""
+        todo = list(dict.fromkeys(f for f in faces if f not in self._areas))  # a face met twice is one
+        price = {f: c for f, c in zip(faces, cost, strict=True)}
+        order = sorted(range(len(todo)), key=lambda k: (-price[todo[k]], k))
+        areas = map_faces(lambda k: _area(todo[k]), order, cost=[price[todo[k]] for k in order],
+                          parallel_min=AREAS_PARALLEL_MIN)
+        self._areas.update((todo[k], areas[k]) for k in range(len(todo)))
+
+
+def _area(face: TopoDS_Face) -> float:
+    """|∫∫ dA| of a face by OCCT's surface integral (BRepGProp)."""
+    props = GProp_GProps()
+    BRepGProp.SurfaceProperties_s(face, props)
+    return abs(props.Mass())
 
 
 def explore(shape: TopoDS_Shape, kind, cast, avoid=None) -> list:  # type: ignore[no-untyped-def,type-arg]

@@ -4,7 +4,6 @@ faces with a pole (a degenerated edge)."""
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -20,7 +19,8 @@ from amprep.geometry.cad.surfaces import CYLINDER, SPHERE, TORUS, Surface, uv_ex
 from amprep.geometry.cad.topology import Topology, explore, face_edges
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING, difference_step, surface_speeds
-from amprep.geometry.meshing.uv_seed import LOCAL_FLOOR, standing_error
+from amprep.geometry.meshing.uv_seed import BOUNDED_MEDIANS, LOCAL_FLOOR, median_speeds, standing_error
+from amprep.geometry.parallel.face_pool import map_faces
 
 
 def discretize_edge(edge: TopoDS_Edge, tolerance: float, angular: float) -> np.ndarray:
@@ -139,6 +139,8 @@ def collapse_short_edges(faces: list[TopoDS_Face], topo: Topology, shortest: flo
 GRADE = 3.0
 #: surface types (Surface.surface_type) whose (u,v) maps boundary lines and circles to lines in (u,v)
 ANALYTIC = ("plane", "cylinder", "cone", "sphere", "torus")
+#: an analytic face's area costs OCCT about this × a free-form face's (Topology.measure_areas)
+ANALYTIC_AREA = 0.2
 #: a boundary segment may be at most its distance from the nearer end × this, plus the shortest segment there
 GROWTH = 1.0
 #: and is cut into at most this many parts (a sliver face's width can be near zero)
@@ -162,8 +164,10 @@ BEND_SLACK = 0.1
 #: the curvature there is taken over steps of this × the target on the surface (a fold far finer, as a fitted
 #: B-spline's overshoot by 1 µm along a side where its speed vanishes, is not the face's shape)
 STENCIL = 2.0
-#: the surface's typical speeds (bend_sizes' floor of the first form) are the median over this many² points
-SPEED_GRID = 5
+#: bend_sizes_many's work on one surface, in points' worth beside its points (three a segment); it forks where all of it
+#: is this much or more (about a tenth of a second)
+BEND_PER_SURFACE = 200
+BEND_PARALLEL_MIN = 20_000
 #: a pcurve is straight in (u,v) when its points lie within this × its (u,v) chord of the chord
 UV_STRAIGHT = 1e-6
 
@@ -262,6 +266,7 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
     below `floor` (the chord tolerance: finer steps buy no regularity, only needles by a tiny segment), and none for
     the widths or the growth below `shortest` (the user's min_size: fewer, thinner triangles on thin walls)."""
     wide = max(floor, shortest)
+    topo.measure_areas(faces, [ANALYTIC_AREA if s.surface_type in ANALYTIC else 1.0 for s in surfaces])  # face_width's
     cap: dict[int, tuple[float, object]] = {}
     bent: dict[int, list[tuple[TopoDS_Face, Surface]]] = {}
     straight: set[int] = set()  # straight edges curved in the (u,v) of a B-spline or other free-form face, or of one
@@ -434,56 +439,57 @@ def bend_sizes(edge: TopoDS_Edge, params: np.ndarray, faces: list[tuple[TopoDS_F
 def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[tuple[TopoDS_Face, Surface]]]],
                     target: float) -> list[np.ndarray]:
     """bend_sizes of each (edge, params (n,), its points there (n, 3), its faces), the points of all the edges on one
-    face evaluated on its surface together; each (edge, face) pair keeps its own difference steps and floor."""
+    face evaluated on its surface together, the surfaces side by side (face_pool.map_faces, the most points first:
+    each surface's numbers are the same in any process); each (edge, face) pair keeps its own difference steps and
+    floor."""
     out = [np.zeros(3 * (len(params) - 1)) for _, params, _, _ in edges]
     by_face: dict[int, tuple[Surface, list]] = {}  # type: ignore[type-arg]
     for k, (edge, params, points, faces) in enumerate(edges):
         t = (params[:-1, None] + np.array([0.25, 0.5, 0.75])[None] * np.diff(params)[:, None]).ravel()
         chord = np.repeat(np.diff(points, axis=0), 3, axis=0)
         for face, surface in faces:
-            pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-            if pcurve is not None:
-                uv = curve_values(Geom2dAdaptor_Curve(pcurve), t).reshape(-1, 2)
-                by_face.setdefault(id(surface), (surface, []))[1].append((k, uv, chord))
-    for surface, pairs in by_face.values():
-        median = _bounded_median_speeds(surface) if surface.bounds is not None else None
-        uv = np.concatenate([uv for _, uv, _ in pairs])
-        floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(median if median is not None else _median_speeds(
-            surface, (*np.sort(q[[0, -1], 0]), *np.sort(q[[0, -1], 1]))), q.shape) for _, q, _ in pairs])  # its ends' box
-        h = np.concatenate([np.full(len(q), difference_step(q)) for _, q, _ in pairs])  # each pair's own step
-        speeds = np.stack(surface_speeds(surface, uv, uv, step=h), axis=1)
-        step = np.minimum(STENCIL * target / np.maximum(np.maximum(speeds, floor), 1e-300), uv_extent(surface) / 8)
-        if surface.bounds is not None:  # the stencil inside the face: past its bounds a surface may be clamped
-            u1, u2, v1, v2 = surface.bounds
-            uv = np.clip(uv, np.array([u1, v1]) + step, np.array([u2, v2]) - step)
-        room = ROOM if surface.surface_type not in ANALYTIC else 1.0  # an analytic face's edges are at the target
-        error = standing_error(surface, uv, step, floor, np.concatenate([c for _, _, c in pairs]), APEX) / room
-        start = 0
-        for k, q, _ in pairs:
-            out[k] = np.maximum(out[k], error[start:start + len(q)])
-            start += len(q)
+            by_face.setdefault(id(surface), (surface, []))[1].append((k, edge, face, t, chord))
+    work = list(by_face.values())
+    cost = [BEND_PER_SURFACE + sum(len(t) for *_, t, _ in pairs) for _, pairs in work]
+    order = sorted(range(len(work)), key=lambda g: (-cost[g], g))
+    found = map_faces(lambda g: _standing_on(work[g][0], work[g][1], target), order,
+                      cost=[cost[g] for g in order], parallel_min=BEND_PARALLEL_MIN)
+    for g, (surface, _) in enumerate(work):
+        errors, median = found[g]
+        if median is not None:  # made in a forked child: kept here for the next pass
+            BOUNDED_MEDIANS.setdefault(surface, median)
+        for k, error in errors:
+            out[k] = np.maximum(out[k], error)
     with np.errstate(divide="ignore"):
         return [np.where(b > 0, np.sqrt(target / b), np.inf) for b in (b.reshape(-1, 3).max(axis=1) for b in out)]
 
 
-#: _median_speeds of each face with known (u,v) bounds, a function of the surface alone: asked once per surface
-_MEDIANS: weakref.WeakKeyDictionary[Surface, np.ndarray] = weakref.WeakKeyDictionary()
-
-
-def _bounded_median_speeds(surface: Surface) -> np.ndarray:
-    """_median_speeds over the bounds of a surface that has them, once per surface."""
-    known = _MEDIANS.get(surface)
-    if known is None:
-        known = _MEDIANS[surface] = _median_speeds(surface, surface.bounds)  # type: ignore[arg-type]
-    return known
-
-
-def _median_speeds(surface: Surface, box: tuple[float, float, float, float]) -> np.ndarray:
-    """(2,) the median |S_u|, |S_v| over a SPEED_GRID² grid of the (u,v) box (u0, u1, v0, v1)."""
-    g = np.linspace(0.05, 0.95, SPEED_GRID)
-    u, v = np.meshgrid(box[0] + g * (box[1] - box[0]), box[2] + g * (box[3] - box[2]))
-    grid = np.stack([u.ravel(), v.ravel()], axis=1)
-    return np.median(np.stack(surface_speeds(surface, grid, grid), axis=1), axis=0)
+def _standing_on(surface: Surface, pairs: list[tuple[int, TopoDS_Edge, TopoDS_Face, np.ndarray, np.ndarray]],
+                 target: float) -> tuple[list[tuple[int, np.ndarray]], np.ndarray | None]:
+    """([(k, error (3m,))], the surface's median_speeds over its bounds or None): uv_seed.standing_error / ROOM at each pair's
+    parameters t (3m,) of its edge k on one face of `surface` (chords (3m, 3)), the stencil's steps STENCIL × the
+    target on the surface and inside its bounds; pairs whose edge has no pcurve on the face are left out."""
+    found = []
+    for k, edge, face, t, chord in pairs:
+        pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+        if pcurve is not None:
+            found.append((k, curve_values(Geom2dAdaptor_Curve(pcurve), t).reshape(-1, 2), chord))
+    if not found:
+        return [], None
+    median = median_speeds(surface) if surface.bounds is not None else None
+    uv = np.concatenate([uv for _, uv, _ in found])
+    floor = LOCAL_FLOOR * np.concatenate([np.broadcast_to(median if median is not None else median_speeds(
+        surface, (*np.sort(q[[0, -1], 0]), *np.sort(q[[0, -1], 1]))), q.shape) for _, q, _ in found])  # its ends' box
+    h = np.concatenate([np.full(len(q), difference_step(q)) for _, q, _ in found])  # each pair's own step
+    speeds = np.stack(surface_speeds(surface, uv, uv, step=h), axis=1)
+    step = np.minimum(STENCIL * target / np.maximum(np.maximum(speeds, floor), 1e-300), uv_extent(surface) / 8)
+    if surface.bounds is not None:  # the stencil inside the face: past its bounds a surface may be clamped
+        u1, u2, v1, v2 = surface.bounds
+        uv = np.clip(uv, np.array([u1, v1]) + step, np.array([u2, v2]) - step)
+    room = ROOM if surface.surface_type not in ANALYTIC else 1.0  # an analytic face's edges are at the target
+    error = standing_error(surface, uv, step, floor, np.concatenate([c for _, _, c in found]), APEX) / room
+    bounds = np.cumsum([0] + [len(q) for _, q, _ in found])
+    return [(k, error[a:b]) for (k, _, _), a, b in zip(found, bounds[:-1], bounds[1:], strict=True)], median
 
 
 def has_pole(face: TopoDS_Face) -> bool:

@@ -7,6 +7,7 @@ square, the cells no longer than twice their width there."""
 
 from __future__ import annotations
 
+import weakref
 from functools import lru_cache
 
 import numpy as np
@@ -53,6 +54,8 @@ DIFF_STEP = 1e-4
 #: point within POLE_CLEAR × that distance of it
 POLE_ROW = 0.8
 POLE_CLEAR = 1.5
+#: a surface's typical speeds (median_speeds) are the median over this many² points
+SPEED_GRID = 5
 
 _OFFSETS = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], float)
 _CORNERS = np.array([[-1, -1], [1, -1], [-1, 1], [1, 1]], float) * 0.5
@@ -343,3 +346,21 @@ def clear_poles(seeds: np.ndarray, runs: list[np.ndarray], scale: np.ndarray, lo
         row = row[inside_loops(row, scaled)]
         rows.append(row[_off_boundary(row, np.full(len(row), 2 * d), scaled)] if len(row) else row)
     return np.concatenate([pts, *rows]) / scale
+
+
+#: median_speeds over the bounds of each surface that has them, a function of the surface alone: made once per surface
+BOUNDED_MEDIANS: weakref.WeakKeyDictionary[Surface, np.ndarray] = weakref.WeakKeyDictionary()
+
+
+def median_speeds(surface: Surface, box: tuple[float, float, float, float] | None = None) -> np.ndarray:
+    """(2,) the median |S_u|, |S_v| over a SPEED_GRID² grid of the (u,v) box (u0, u1, v0, v1); with no box, over the
+    surface's bounds, made once per surface (BOUNDED_MEDIANS)."""
+    if box is None:
+        known = BOUNDED_MEDIANS.get(surface)
+        if known is None:
+            known = BOUNDED_MEDIANS[surface] = median_speeds(surface, surface.bounds)
+        return known
+    g = np.linspace(0.05, 0.95, SPEED_GRID)
+    u, v = np.meshgrid(box[0] + g * (box[1] - box[0]), box[2] + g * (box[3] - box[2]))
+    grid = np.stack([u.ravel(), v.ravel()], axis=1)
+    return np.median(np.stack(surface_speeds(surface, grid, grid), axis=1), axis=0)
