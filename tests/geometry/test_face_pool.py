@@ -43,9 +43,10 @@ def test_faces_meshed_in_worker_processes_equal_the_serial_mesh(monkeypatch):
 @pytest.mark.skipif(not face_pool.can_fork(), reason="no fork here")
 def test_the_quality_meshers_plan_made_side_by_side_equals_the_serial_plan(monkeypatch):
     """The quality mesher's planning forks for the faces' areas (Topology.measure_areas) and the edges' standing
-    sizes (shared_edges.bend_sizes_many, one surface per task): forced to fork for both, OCCT's sample part at 0.1 mm comes out bit for bit as with no fork at all."""
+    sizes (shared_edges.bend_sizes_many, one surface per task) and the lattices' fields (plan_lattices): forced to
+    fork for all three, OCCT's sample part at 0.03 mm (13 lattices) comes out bit for bit as with no fork at all."""
     from amprep.geometry.cad import topology
-    from amprep.geometry.meshing import shared_edges, uv_seed
+    from amprep.geometry.meshing import lattice, shared_edges, uv_seed
 
     load_kernels()
     model = read_cad(corpus("occt_top_invalid.brep"))
@@ -59,11 +60,13 @@ def test_the_quality_meshers_plan_made_side_by_side_equals_the_serial_plan(monke
     monkeypatch.setattr(face_pool, "Forked", counting)
     monkeypatch.setattr(topology, "AREAS_PARALLEL_MIN", 0.0)
     monkeypatch.setattr(shared_edges, "BEND_PARALLEL_MIN", 0.0)
-    pooled = mesh_model(model, MeshParams(tolerance=0.1, mesher="quality"))
-    assert any("measure_areas" in q for q in forked) and any("bend_sizes_many" in q for q in forked), forked
+    monkeypatch.setattr(lattice, "FIELDS_PARALLEL_MIN", 0.0)
+    pooled = mesh_model(model, MeshParams(tolerance=0.03, mesher="quality"))
+    assert {"measure_areas", "bend_sizes_many", "plan_lattices"} <= {q.split(".")[-3] for q in forked}, forked
+    assert any(p.meshed_by == "lattice" for p in pooled.mesh.faces)
     monkeypatch.setattr(face_pool, "can_fork", lambda: False)
     uv_seed.BOUNDED_MEDIANS.clear()
-    serial = mesh_model(read_cad(corpus("occt_top_invalid.brep")), MeshParams(tolerance=0.1, mesher="quality"))
+    serial = mesh_model(read_cad(corpus("occt_top_invalid.brep")), MeshParams(tolerance=0.03, mesher="quality"))
     assert np.array_equal(pooled.mesh.vertices, serial.mesh.vertices)
     assert np.array_equal(pooled.mesh.triangles, serial.mesh.triangles)
     assert np.array_equal(pooled.face_error, serial.face_error, equal_nan=True)

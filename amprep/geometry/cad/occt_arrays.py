@@ -1,9 +1,11 @@
 """numpy arrays from OCCT values (a point, vector or direction as (3,), a TColStd/TColgp 1-D array as (n,)), and
-1-D OCCT arrays from numpy, and a curve's points at many params."""
+1-D OCCT arrays from numpy, and a curve's points at many params (a pcurve's too, and where it reaches given v)."""
 
 from __future__ import annotations
 
 import numpy as np
+from OCP.BRep import BRep_Tool
+from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.GeomAbs import GeomAbs_BSplineCurve, GeomAbs_Circle, GeomAbs_Ellipse, GeomAbs_Line
 
 from amprep.geometry.cad.bspline import eval_curve
@@ -75,3 +77,28 @@ def _bspline_values(spline, t: np.ndarray) -> np.ndarray:  # type: ignore[no-unt
 def _xy(p) -> np.ndarray:  # type: ignore[no-untyped-def]
     """(2,) or (3,) coordinates of a 2-D or 3-D gp point, vector or direction."""
     return np.array(p.Coord())
+
+
+def pcurve_values(face, edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """(n, 2) the (u,v) of the edge's pcurve on the face at its params (n,)."""
+    return curve_values(Geom2dAdaptor_Curve(BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)), params)
+
+
+def params_at_v(face, edge, v: np.ndarray, samples: int) -> np.ndarray | None:  # type: ignore[no-untyped-def]
+    """(k,) the edge's parameters where its pcurve on the face reaches each v (k,) from its start to its end, sorted:
+    the pcurve sampled at `samples` points and v(t) inverted between them (exact where v is affine in t, as on analytic
+    faces), the first and last the edge's range's; None when it has no pcurve or v is not monotone along it."""
+    first, last = BRep_Tool.Range_s(edge)
+    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+    if pc is None:
+        return None
+    ts = np.linspace(first, last, samples)
+    vs = curve_values(Geom2dAdaptor_Curve(pc), ts)[:, 1]
+    dv = np.diff(vs)
+    if not ((dv > 0).all() or (dv < 0).all()):
+        return None
+    if dv[0] < 0:
+        ts, vs = ts[::-1], vs[::-1]
+    t = np.sort(np.interp(v, vs, ts))
+    t[0], t[-1] = min(first, last), max(first, last)
+    return t

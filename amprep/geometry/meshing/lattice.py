@@ -14,7 +14,7 @@ from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.TopoDS import TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.cad.occt_arrays import curve_values
+from amprep.geometry.cad.occt_arrays import curve_values, params_at_v, pcurve_values
 from amprep.geometry.cad.surfaces import CONE, CYLINDER, SPHERE, TORUS, Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.measure.chordal import triangle_chordal_error
@@ -23,6 +23,7 @@ from amprep.geometry.meshing.occt_read import FacePatch
 from amprep.geometry.meshing.shared_edges import ANALYTIC, MAX_PARTS, bend_sizes, edge_points, has_pole, split_segments
 from amprep.geometry.meshing.uv_cdt import surface_speeds
 from amprep.geometry.meshing.uv_seed import DIFF_STEP, polygon_area, second_form
+from amprep.geometry.parallel.face_pool import map_faces
 
 #: closed_form kinds (cad/surfaces.py) the lattice meshes: cylinder, cone, sphere, torus
 KINDS = (CYLINDER, CONE, SPHERE, TORUS)
@@ -42,6 +43,8 @@ SAMPLES = 129
 #: whose first look expects under half LATTICE_MIN triangles is not sampled further
 SAMPLED = 33
 GLANCE = 5
+#: plan_lattices forks for the faces' fields where they sample this many points or more (about a tenth of a second)
+FIELDS_PARALLEL_MIN = 60_000
 #: a sampled surface is latticed only when the row step its curvature asks for varies by at most this factor along
 #: its rows (the median row; the rows take the smallest step, so a larger spread makes flat triangles where it is
 #: larger): a B-spline cylinder's is 1, a sheet whose parametrisation crowds toward one corner 20
@@ -49,7 +52,7 @@ ROW_SPREAD = 4.0
 #: a boundary segment up to this much longer than the row's node step beside it is not cut (a cut would double it)
 SPLIT_SLACK = 0.25
 #: the left and right sides' nodes make one row when their v differ by under this × the rows' smallest spacing (two
-#: pcurves inverted apart, _param_of_v)
+#: pcurves inverted apart, occt_arrays.params_at_v)
 ROW_MATCH = 1e-3
 #: samples of a side edge's pcurve where its parameter is found for each row's v
 PCURVE_SAMPLES = 257
@@ -238,31 +241,6 @@ def expected_triangles(field: Field, sides: Sides, rows: np.ndarray) -> float:
 
 
 # ---- planning: before any face is meshed, the rows are written into the shared edge discretisation
-def _param_of_v(face: TopoDS_Face, edge, rows: np.ndarray) -> np.ndarray | None:  # type: ignore[no-untyped-def]
-    """(N+1,) parameters of an iso-u edge at the rows' v, sorted: its pcurve on the face sampled (PCURVE_SAMPLES) and
-    v(t) inverted between the samples (exact where v is affine in t, as on analytic faces); None when v is not
-    monotone along the edge."""
-    first, last = BRep_Tool.Range_s(edge)
-    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-    if pc is None:
-        return None
-    ts = np.linspace(first, last, PCURVE_SAMPLES)
-    vs = curve_values(Geom2dAdaptor_Curve(pc), ts)[:, 1]
-    dv = np.diff(vs)
-    if not ((dv > 0).all() or (dv < 0).all()):
-        return None
-    if dv[0] < 0:
-        ts, vs = ts[::-1], vs[::-1]
-    t = np.sort(np.interp(rows, vs, ts))
-    t[0], t[-1] = min(first, last), max(first, last)
-    return t
-
-
-def _edge_v(face: TopoDS_Face, edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
-    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-    return np.sort(curve_values(Geom2dAdaptor_Curve(pc), params)[:, 1])
-
-
 def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list[list[dict]], topo: Topology,  # type: ignore[type-arg]
                   tolerance: float, angular: float, max_triangles: int = 10**12) -> list[Field | None]:
     """For each face a lattice can mesh (one loop, rectangle_sides, a field_of its surface, at least LATTICE_MIN
@@ -278,22 +256,23 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
         if surface is not None and surface.surface_type not in ANALYTIC:
             for e in face_edges(face):
                 free_form.setdefault(topo.edge_index(e), []).append((k, face, surface))
-    for k, (face, surface, lps) in enumerate(zip(faces, surfaces, loops, strict=True)):
-        if surface is None or len(lps) != 1 or (sides := rectangle_sides(lps[0])) is None or min(sides.edges[:2]) < 0:
+    candidates = {k: sides for k, (surface, lps) in enumerate(zip(surfaces, loops, strict=True))
+                  if surface is not None and len(lps) == 1 and (sides := rectangle_sides(lps[0])) is not None
+                  and min(sides.edges[:2]) >= 0}
+    order = sorted(candidates, key=lambda k: (surfaces[k].closed_form is not None, k))  # the sampled ones cost more
+    fields = map_faces(lambda k: _field_and_rows(surfaces[k], candidates[k], tolerance, angular), order,
+                       cost=[1.0 if surfaces[k].closed_form is not None else SAMPLED**2 for k in order],
+                       parallel_min=FIELDS_PARALLEL_MIN)
+    for k, (face, surface) in enumerate(zip(faces, surfaces, strict=True)):
+        if fields.get(k) is None:
             continue
-        if surface.closed_form is None:
-            glance = field_of(surface, sides, tolerance, angular, GLANCE)
-            rows = None if glance is None else row_values(glance, sides.v0, sides.v1)
-            if rows is None or expected_triangles(glance, sides, rows) < LATTICE_MIN / 2:  # type: ignore[arg-type]
-                continue
-        field = field_of(surface, sides, tolerance, angular, SAMPLED)
-        rows = None if field is None else row_values(field, sides.v0, sides.v1)
-        n = 0.0 if rows is None else expected_triangles(field, sides, rows)  # type: ignore[arg-type]
-        if rows is None or (n < LATTICE_MIN and not (surface.closed_form is not None and has_pole(face))):
+        sides, (field, rows) = candidates[k], fields[k]
+        n = expected_triangles(field, sides, rows)
+        if n < LATTICE_MIN and not (surface.closed_form is not None and has_pole(face)):
             continue
         edges = {e: edge for e, edge in ((topo.edge_index(x), x) for x in face_edges(face))}
         lr = sides.edges[:2]
-        given = [_edge_v(face, edges[e], topo.edge_params[e]) for e in lr if e in fixed]
+        given = [np.sort(pcurve_values(face, edges[e], topo.edge_params[e])[:, 1]) for e in lr if e in fixed]
         if given:
             if any(len(g) != len(given[0]) or not np.allclose(g, given[0], rtol=0, atol=1e-9) for g in given):
                 continue
@@ -309,7 +288,7 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
             raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tolerance:g} mm the quality mesher's rows alone would "
                               f"make about {expected:,.0f} triangles, over the limit of {max_triangles:,}: use a "
                               "coarser tolerance, the default mesher or a higher max_triangles")
-        new = {e: _param_of_v(face, edges[e], rows) for e in set(lr) if e not in fixed}
+        new = {e: params_at_v(face, edges[e], rows, PCURVE_SAMPLES) for e in set(lr) if e not in fixed}
         if any(p is None for p in new.values()):
             continue
         for e, p in new.items():
@@ -323,16 +302,30 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
     return planned
 
 
+def _field_and_rows(surface: Surface, sides: Sides, tolerance: float,
+                    angular: float) -> tuple[Field, np.ndarray] | None:
+    """(field_of the face's surface on its sides, its row_values) or None: no field or rows, or (a sampled field) too
+    few triangles by a GLANCE² sampling to be worth SAMPLED²; the same in any process (plan_lattices forks for them)."""
+    if surface.closed_form is None:
+        glance = field_of(surface, sides, tolerance, angular, GLANCE)
+        rows = None if glance is None else row_values(glance, sides.v0, sides.v1)
+        if rows is None or expected_triangles(glance, sides, rows) < LATTICE_MIN / 2:  # type: ignore[arg-type]
+            return None
+    field = field_of(surface, sides, tolerance, angular, SAMPLED)
+    rows = None if field is None else row_values(field, sides.v0, sides.v1)
+    return None if rows is None else (field, rows)  # type: ignore[return-value]
+
+
 def _rows_for_neighbours(face: TopoDS_Face, edges: dict, neighbours: dict[int, list[tuple[TopoDS_Face, Surface]]],  # type: ignore[type-arg]
                          rows: np.ndarray, tolerance: float) -> np.ndarray | None:
     """The rows (N+1,) with each step cut where a side edge's segment at them is longer than a free-form face on its
     other side allows (shared_edges.bend_sizes: a triangle of that face on a longer segment is a sliver); None when a
-    side's v is not monotone along it (_param_of_v)."""
+    side's v is not monotone along it (occt_arrays.params_at_v)."""
     parts = np.ones(len(rows) - 1, np.int64)
     for e, others in neighbours.items():
         if not others:
             continue
-        params = _param_of_v(face, edges[e], rows)
+        params = params_at_v(face, edges[e], rows, PCURVE_SAMPLES)
         if params is None:
             return None
         seg = np.linalg.norm(np.diff(edge_points(edges[e], params), axis=0), axis=1)
