@@ -14,6 +14,7 @@ from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
+from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.parallel.face_pool import map_faces
 
 #: measure_areas forks where its faces cost this much (one free-form face's integral ≈ 1: about a millisecond)
@@ -123,7 +124,12 @@ class Topology:
         todo = list(dict.fromkeys(f for f in faces if f not in self._areas))  # a face met twice is one
         price = {f: c for f, c in zip(faces, cost, strict=True)}
         order = sorted(range(len(todo)), key=lambda k: (-price[todo[k]], k))
-        areas = map_faces(lambda k: _area(todo[k]), order, cost=[price[todo[k]] for k in order],
+
+        def area(k: int) -> float:
+            checkpoint()
+            return _area(todo[k])
+
+        areas = map_faces(area, order, cost=[price[todo[k]] for k in order],
                           parallel_min=AREAS_PARALLEL_MIN)
         self._areas.update((todo[k], areas[k]) for k in range(len(todo)))
 

@@ -18,7 +18,7 @@ from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.compiled import compiled
-from amprep.geometry.core.progress import Progress, ProgressFn, budgeted, grew_over
+from amprep.geometry.core.progress import Progress, ProgressFn, budgeted, checkpoint, grew_over
 from amprep.geometry.measure.chordal import kernels_loaded, load_kernels, triangle_chordal_error, worth_compiling
 from amprep.geometry.meshing.face_mesher import boundary_loops, mesh_face
 from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
@@ -161,6 +161,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     made = SharedCount(kept)
 
     def remesh_face(i: int) -> FacePatch | None:
+        checkpoint()  # a cancel is seen face by face
         with budgeted((limit - made.value) // int(f.uses[i]), limit):  # one face stops once it alone would be over
             patch = mesh_one(i)
         # the estimate before meshing is an estimate: the limit is kept as the faces come, in every process at once

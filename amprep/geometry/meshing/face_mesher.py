@@ -15,7 +15,7 @@ from amprep.geometry.cad.occt_arrays import curve_values
 from amprep.geometry.cad.pcurve_shifts import ordered_edges
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, explore, winds_inward
-from amprep.geometry.core.progress import within_budget
+from amprep.geometry.core.progress import checkpoint, within_budget
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.meshing.local_refine import (
     flip_flat_triangles,
@@ -296,6 +296,7 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
     final_err = None
     known_code, known_err = triangle_codes(tris, len(pts)), err
     for _ in range(MAX_ROUNDS):
+        checkpoint()
         uv = pts / scale
         if len(xyz) < len(pts):  # points are only ever appended: evaluate the new ones
             xyz = np.concatenate([xyz, surface.evaluate(uv[len(xyz):])])

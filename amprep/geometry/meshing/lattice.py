@@ -17,6 +17,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.occt_arrays import curve_values, params_at_v, pcurve_values
 from amprep.geometry.cad.surfaces import CONE, CYLINDER, SPHERE, TORUS, Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
+from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.measure.chordal import triangle_chordal_error
 from amprep.geometry.meshing.local_refine import refine_patch
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -264,6 +265,7 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
                        cost=[1.0 if surfaces[k].closed_form is not None else SAMPLED**2 for k in order],
                        parallel_min=FIELDS_PARALLEL_MIN)
     for k, (face, surface) in enumerate(zip(faces, surfaces, strict=True)):
+        checkpoint()
         if fields.get(k) is None:
             continue
         sides, (field, rows) = candidates[k], fields[k]

@@ -13,7 +13,7 @@ import numpy as np
 from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
-from amprep.geometry.core.progress import within_budget
+from amprep.geometry.core.progress import checkpoint, within_budget
 from amprep.geometry.core.vectors import cross, dot, norms, turn
 from amprep.geometry.measure.angles import flip_candidates, min_angles_at, unit_normals_at
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
@@ -86,6 +86,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     codes, count = np.unique(edge_codes(tris, len(pts) + 1), return_counts=True)
     boundary_pairs = np.stack(np.divmod(codes[count == 1], len(pts) + 1), axis=1)  # the face's boundary: kept
     for _ in range(rounds):
+        checkpoint()
         bad = err > tolerance
         if not bad.any():
             break
@@ -275,6 +276,7 @@ def flip_for_angles(patch: FacePatch, surface: Surface, tolerance: float, order:
     active = np.ones(len(tris), bool)  # a pair of triangles neither of which changed has nothing new to offer
     packed = _packed_sides(tris, len(xyz))
     for _ in range(FLIP_PASSES):
+        checkpoint()
         t1, k1, t2, k2 = _shared_sides(tris, len(xyz)) if packed is None else _pairs(packed, 3 * len(tris))
         look = active[t1] | active[t2]
         t1, k1, t2, k2 = t1[look], k1[look], t2[look], k2[look]
@@ -410,6 +412,7 @@ def smooth_on_surface(patch: FacePatch, surface: Surface, tolerance: float, orde
         before = angle.mean()
         candidates = free.copy()
         for _ in range(SMOOTH_SETS):
+            checkpoint()
             movers = _independent(candidates, sides, priority)
             if not movers.any():
                 break

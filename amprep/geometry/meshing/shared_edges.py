@@ -17,6 +17,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 from amprep.geometry.cad.occt_arrays import curve_values
 from amprep.geometry.cad.surfaces import CYLINDER, SPHERE, TORUS, Surface, uv_extent
 from amprep.geometry.cad.topology import Topology, explore, face_edges
+from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.meshing.uv_cdt import MIN_SPACING, difference_step, surface_speeds
 from amprep.geometry.meshing.uv_seed import BOUNDED_MEDIANS, LOCAL_FLOOR, median_speeds, standing_error
@@ -469,6 +470,7 @@ def _standing_on(surface: Surface, pairs: list[tuple[int, TopoDS_Edge, TopoDS_Fa
     """([(k, error (3m,))], the surface's median_speeds over its bounds or None): uv_seed.standing_error / ROOM at each pair's
     parameters t (3m,) of its edge k on one face of `surface` (chords (3m, 3)), the stencil's steps STENCIL × the
     target on the surface and inside its bounds; pairs whose edge has no pcurve on the face are left out."""
+    checkpoint()
     found = []
     for k, edge, face, t, chord in pairs:
         pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)

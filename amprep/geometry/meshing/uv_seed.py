@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.core.progress import within_budget
+from amprep.geometry.core.progress import checkpoint, within_budget
 from amprep.geometry.core.vectors import cross
 from amprep.geometry.measure.chordal import barycentric_grid
 from amprep.geometry.meshing.uv_cdt import inside_loops, surface_speeds
@@ -175,6 +175,7 @@ def size_cells(surface: Surface, b_uv: np.ndarray, target: float, share: float =
     leaf_c, leaf_s = [], []
     bound = 8 * target
     for _ in range(MAX_LEVELS):
+        checkpoint()
         L, M, N = second_form(surface, centers, step)
         du, dv = sizes[:, 0], sizes[:, 1]
         with np.errstate(divide="ignore"):
