@@ -248,7 +248,8 @@ def plan_lattices(faces: list[TopoDS_Face], surfaces: list[Surface], loops: list
     triangles): its left and right side edges discretised at its rows (row_values), or, where an earlier face set
     one, the face takes those rows when both sides agree; its bottom and top edges' segments split to the steps of
     the row beside them. Returns each face's Field, None where it is not planned (only planned faces are meshed by
-    mesh_lattice). output_too_large, before any node is made, when the planned lattices would exceed max_triangles."""
+    mesh_lattice). output_too_large, before any node is made, when the planned lattices would exceed max_triangles.
+    The faces' fields and rows (_field_and_rows) are worked out first, side by side: only the sides are shared."""
     fixed: set[int] = getattr(topo, "_lattice_edges", set())
     planned: list[Field | None] = [None] * len(faces)
     expected = 0.0

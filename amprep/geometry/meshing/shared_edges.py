@@ -467,8 +467,8 @@ def bend_sizes_many(edges: list[tuple[TopoDS_Edge, np.ndarray, np.ndarray, list[
 
 def _standing_on(surface: Surface, pairs: list[tuple[int, TopoDS_Edge, TopoDS_Face, np.ndarray, np.ndarray]],
                  target: float) -> tuple[list[tuple[int, np.ndarray]], np.ndarray | None]:
-    """([(k, error (3m,))], the surface's median_speeds over its bounds or None): uv_seed.standing_error / ROOM at each pair's
-    parameters t (3m,) of its edge k on one face of `surface` (chords (3m, 3)), the stencil's steps STENCIL × the
+    """([(k, error (3m,))], the surface's median_speeds over its bounds or None): standing_error / ROOM at each
+    pair's params t (3m,) of its edge k on one face of `surface` (chords (3m, 3)), the stencil's steps STENCIL × the
     target on the surface and inside its bounds; pairs whose edge has no pcurve on the face are left out."""
     checkpoint()
     found = []
