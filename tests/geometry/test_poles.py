@@ -111,3 +111,50 @@ def test_two_faces_closing_a_narrow_corner_with_one_triangle_drop_it():
     faces = np.array([0, 1, 0, 1])
     on_boundary = np.array([True, True, False, False])
     assert fins(tris, faces, on_boundary).tolist() == [True, True, False, False]
+
+
+def _horn_torus_distances(tol: float, mesher: str, radius: float = 10.0):  # type: ignore[no-untyped-def]
+    """(the MeshResult of a horn torus of ring and tube radius `radius`, (t,) the largest true distance of each
+    triangle's order-6 grid points from the torus, |√((ρ − R)² + z²) − r|, (t,) the smallest ρ of its corners)."""
+    import cadquery as cq
+
+    r = mesh_model(model_from_shape(cq.Solid.makeTorus(radius, radius).wrapped), MeshParams(tolerance=tol, mesher=mesher))
+    g = np.array([(i / 6, j / 6) for i in range(7) for j in range(7 - i)])
+    weights = np.stack([1 - g.sum(axis=1), g[:, 0], g[:, 1]], axis=1)  # (28, 3)
+    corners = r.mesh.vertices[r.mesh.triangles]
+    points = np.einsum("pk,tkd->tpd", weights, corners)
+    rho = np.hypot(points[..., 0], points[..., 1])
+    distance = np.abs(np.hypot(rho - radius, points[..., 2]) - radius).max(axis=1)
+    return r, distance, np.hypot(corners[..., 0], corners[..., 1]).min(axis=1)
+
+
+def test_a_horn_torus_is_mended_within_the_tolerance_despite_its_flat_triangles():
+    """A horn torus (tube radius = ring radius: its whole inner equator, a line of (u,v), is one point on the axis,
+    with no degenerated edge to say so) meshed by the default mesher at 1 µm: refinement left two triangles by the
+    seam at 1.7× the tolerance, and every enforcement round refused their mending because the face held flat
+    triangles at the axis point, which the mending had not made; the face was meshed again to the same mesh four
+    times (11 s). Mending is now refused only for flat triangles it adds. Checked by the true distance from the
+    torus away from the axis point (the next test is about that point)."""
+    tol = 0.001
+    r, distance, rho = _horn_torus_distances(tol, "occt")
+    assert check_mesh(r.mesh).closed and r.within_tolerance, r.max_error / tol
+    away = rho > 1.0  # a tenth of the radius from the axis
+    assert distance[away].max() <= tol * 1.001, distance[away].max() / tol
+
+
+@pytest.mark.xfail(strict=True, reason="known: the default mesher's triangles at a horn torus's axis point are up to "
+                   "4.8x the tolerance off the torus by true distance while the (u,v) measure finds them within it")
+def test_the_default_meshers_triangles_at_a_horn_torus_axis_point_keep_the_tolerance():
+    """Where a line of (u,v) is one point inside a face (not a degenerated edge's pole), the surface under a (u,v)
+    triangle folds over the axis: the measure, the surface's points at the triangle's (u,v) grid against its plane,
+    sees them near the plane while the triangle's own points lie off the surface (182 triangles at 0.01 mm, up to
+    4.8×). The quality mesher's are within it (0.93×). Fails while that stands."""
+    tol = 0.01
+    _, distance, _ = _horn_torus_distances(tol, "occt")
+    assert distance.max() <= tol * 1.001, distance.max() / tol
+
+
+def test_the_quality_meshers_triangles_at_a_horn_torus_axis_point_keep_the_tolerance():
+    tol = 0.01
+    r, distance, _ = _horn_torus_distances(tol, "quality")
+    assert check_mesh(r.mesh).closed and distance.max() <= tol * 1.001, distance.max() / tol

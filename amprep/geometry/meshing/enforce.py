@@ -401,8 +401,9 @@ def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
 
 def _mend(f: FaceStates, over: list[int], todo: set[int]) -> None:
     """Refine the faces over the tolerance whose boundary stands where they fail, the rest of their mesh kept
-    (large faces with few bad triangles and no pole); add every other face, and any whose mending fails or leaves it
-    worse (a region re-triangulated in a (u,v) space the face was not meshed in can span it), to `todo`."""
+    (large faces with few bad triangles and no pole); add every other face, and any whose mending fails, leaves it
+    worse (a region re-triangulated in a (u,v) space the face was not meshed in can span it) or adds flat triangles,
+    to `todo`."""
     target = f.tol * ENFORCE_MARGIN
     mend = []
     for i in over:
@@ -418,8 +419,11 @@ def _mend(f: FaceStates, over: list[int], todo: set[int]) -> None:
         refined = refine_patch(f.patches[i], f.errors[i], f.surfaces[i], target, order)  # type: ignore[arg-type]
         if refined is not None:
             refined = flip_flat_triangles(refined, f.surfaces[i], target, order, f.min_area)  # type: ignore[arg-type]
-        worse = refined is not None and np.nanmax(refined.error, initial=0) > np.nanmax(f.errors[i], initial=0)  # type: ignore[arg-type]
-        return None if refined is None or worse or flat_triangles(refined, f.min_area).any() else refined
+        if refined is None or np.nanmax(refined.error, initial=0) > np.nanmax(f.errors[i], initial=0):  # type: ignore[arg-type]
+            return None
+        # flat triangles it made; a face may hold some already (a horn torus's axis: a line of (u,v) at one point)
+        return None if flat_triangles(refined, f.min_area).sum() > flat_triangles(f.patches[i], f.min_area).sum() \
+            else refined
 
     for i, refined in _costliest_first(mend_face, mend, f.patches, f.errors, target).items():
         if refined is None:
