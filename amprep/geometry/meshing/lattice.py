@@ -10,11 +10,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from OCP.BRep import BRep_Tool
-from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.TopoDS import TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.cad.occt_arrays import curve_values, params_at_v, pcurve_values
+from amprep.geometry.cad.occt_arrays import params_at_v, pcurve_values
 from amprep.geometry.cad.surfaces import CONE, CYLINDER, SPHERE, TORUS, Surface
 from amprep.geometry.cad.topology import Topology, face_edges, winds_inward
 from amprep.geometry.core.progress import checkpoint
@@ -348,8 +347,7 @@ def _split_to_field(face: TopoDS_Face, edge, topo: Topology, field: Field, v: fl
     """Cut the segments of an iso-v edge (a bottom or top side) longer in u than the field's node step at that row."""
     ei = topo.edge_index(edge)
     params = topo.edge_params[ei]
-    pc = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
-    u = curve_values(Geom2dAdaptor_Curve(pc), params)[:, 0]
+    u = pcurve_values(face, edge, params)[:, 0]
     density = np.interp((u[:-1] + u[1:]) / 2, field.us, field.per_u_at(np.array([v]))[0])
     parts = np.maximum(np.ceil(np.abs(np.diff(u)) * density - SPLIT_SLACK), 1).astype(np.int64)
     if (parts > 1).any():
