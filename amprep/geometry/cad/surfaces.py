@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from OCP.BRepAdaptor import BRepAdaptor_Surface
@@ -51,6 +52,11 @@ class Surface:
     periods: tuple[float | None, float | None] = (None, None)  # period of u and of v where periodic
     bounds: tuple[float, float, float, float] | None = None  # (u1, u2, v1, v2) of the face
     closed_form: tuple[int, np.ndarray] | None = None  # (kind, O X Y Z a b) for the compiled chordal kernel
+
+    @cached_property
+    def folds(self) -> tuple[tuple[int, float], ...]:
+        """The lines of (u,v) inside the face that S maps to one point (fold_lines; none without bounds)."""
+        return () if self.bounds is None else tuple(fold_lines(self, self.bounds))
 
     @property
     def affine(self) -> bool:
@@ -230,6 +236,86 @@ def surface_of(face: TopoDS_Face) -> Surface:
     periods = (ad.UPeriod() if ad.IsUPeriodic() else None, ad.VPeriod() if ad.IsVPeriodic() else None)
     bounds = (ad.FirstUParameter(), ad.LastUParameter(), ad.FirstVParameter(), ad.LastVParameter())
     return replace(surf, periods=periods, bounds=bounds)
+
+
+#: an iso-line is one point when its samples lie within this fraction of the surface's largest iso-line of each other
+FOLD_SPREAD = 1e-6
+#: iso-lines sampled across a free-form face each way in the search for folds (an n × n grid), and points along each
+FOLD_SAMPLES, FOLD_POINTS = 9, 9
+
+
+def fold_lines(surface: Surface, bounds: tuple[float, float, float, float]) -> list[tuple[int, float]]:
+    """(direction, t) of each iso-line (0: u = t, 1: v = t) strictly inside the face's bounds (u1, u2, v1, v2) that
+    S maps to one point, with no degenerated edge to mark it: a horn or spindle torus's (r ≥ R) axis point at
+    cos v = −R/r, a cone's apex at v = −R/sin α; on B-spline, Bézier and revolved faces the iso-lines' spread
+    sampled and each interior dip followed to its minimum."""
+    if not np.isfinite(bounds).all():
+        return []
+    lo, hi = np.array(bounds[::2]), np.array(bounds[1::2])
+    margin = 1e-9 * np.maximum(hi - lo, 1e-300)
+    if surface.closed_form is not None:
+        kind, prm = surface.closed_form
+        if kind == TORUS and prm[13] >= prm[12]:
+            c = np.arccos(-prm[12] / prm[13])
+            t = np.array([c, -c])
+            t = t + np.ceil((lo[1] + margin[1] - t) / (2 * np.pi)) * 2 * np.pi  # the first copy past v1
+        elif kind == CONE and np.sin(prm[13]) != 0:
+            t = np.array([-prm[12] / np.sin(prm[13])])
+        else:
+            return []
+        return [(1, float(x)) for x in np.unique(t) if lo[1] + margin[1] < x < hi[1] - margin[1]]
+    if surface.surface_type not in ("bspline", "bezier", "revolution") or not surface.exact_numpy:
+        return []
+    g = [np.linspace(lo[d], hi[d], FOLD_SAMPLES) for d in (0, 1)]
+    xyz = surface.evaluate(np.stack(np.meshgrid(*g, indexing="ij"), axis=-1).reshape(-1, 2))
+    xyz = xyz.reshape(FOLD_SAMPLES, FOLD_SAMPLES, 3)
+    spreads = (np.abs(xyz - xyz[:, :1]).max(axis=(1, 2)), np.abs(xyz - xyz[:1]).max(axis=(0, 2)))  # u = t, v = t
+    size = max(spreads[0].max(), spreads[1].max())
+    if not size > 0:
+        return []
+    found = []
+    for d, (t, s) in enumerate(zip(g, spreads, strict=True)):
+        dip = np.flatnonzero((s[1:-1] <= s[:-2]) & (s[1:-1] <= s[2:]) & (s[1:-1] < 0.25 * s.max())) + 1
+        for i in dip:
+            x = _narrowed(surface, d, t[i - 1], t[i + 1], lo, hi, FOLD_SPREAD * size)
+            if x is not None and lo[d] + margin[d] < x < hi[d] - margin[d]:
+                found.append((d, x))
+    return found
+
+
+def _spread(surface: Surface, d: int, t: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(n,) max |S − S₀| over FOLD_POINTS points of each iso-line (direction d) at t (n,) across the face."""
+    uv = np.empty((len(t), FOLD_POINTS, 2))
+    uv[..., d], uv[..., 1 - d] = t[:, None], np.linspace(lo[1 - d], hi[1 - d], FOLD_POINTS)[None, :]
+    xyz = surface.evaluate(uv.reshape(-1, 2)).reshape(len(t), FOLD_POINTS, 3)
+    return np.abs(xyz - xyz[:, :1]).max(axis=(1, 2))
+
+
+def _narrowed(surface: Surface, d: int, a: float, b: float, lo: np.ndarray, hi: np.ndarray,
+              point: float) -> float | None:
+    """t in [a, b] where the iso-line's spread is at most `point`, by golden section on its minimum (60 steps), or
+    None; given up once ten steps shrink the least spread seen less than tenfold (a fold's falls as |t − t*|^k,
+    by over a hundred)."""
+    g = (np.sqrt(5) - 1) / 2
+    x1, x2 = b - g * (b - a), a + g * (b - a)
+    f1, f2 = _spread(surface, d, np.array([x1, x2]), lo, hi)
+    before = min(f1, f2)
+    for step in range(1, 61):
+        if min(f1, f2) <= point:
+            return float(x1 if f1 <= f2 else x2)
+        if f1 <= f2:
+            b, x2, f2 = x2, x1, f1
+            x1 = b - g * (b - a)
+            f1 = _spread(surface, d, np.array([x1]), lo, hi)[0]
+        else:
+            a, x1, f1 = x1, x2, f2
+            x2 = a + g * (b - a)
+            f2 = _spread(surface, d, np.array([x2]), lo, hi)[0]
+        if step % 10 == 0:
+            if min(f1, f2) > before / 10:
+                return None
+            before = min(f1, f2)
+    return None
 
 
 def _surface(ad: BRepAdaptor_Surface) -> Surface:

@@ -188,11 +188,35 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
        float(stop), out)
 
 
+def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np.ndarray, xyz: np.ndarray,
+                  evaluate: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """(m,) max_p min(|S(q_p) − a_p|, |S(q_p + δ_p) − a_p|): each grid point a_p of a triangle against two surface
+    points, so an upper bound of its distance from the surface; q_p its (u,v) (pts_uv (m·P, 2), S there xyz
+    (m, P, 3)), δ_p = U (EᵀE)⁻¹ Eᵀ (a_p − S(q_p)) the step that the triangle's own affine map (edges E (m, 2, 3) over
+    (u,v) edges U) takes to a_p: it removes the parametrisation's tangential drift, which is no distance."""
+    a = np.matmul(w, corners)  # (m, P, 3)
+    off = a - xyz
+    best = norms(off)
+    e = corners[:, 1:] - corners[:, :1]
+    g = np.matmul(e, e.transpose(0, 2, 1))  # EᵀE (m, 2, 2)
+    det = g[:, 0, 0] * g[:, 1, 1] - g[:, 0, 1] * g[:, 1, 0]
+    ok = np.flatnonzero(det > 1e-24 * np.maximum(g[:, 0, 0] * g[:, 1, 1], 1e-300))
+    if len(ok):
+        inv = np.stack([g[ok, 1, 1], -g[ok, 0, 1], -g[ok, 1, 0], g[ok, 0, 0]], axis=1).reshape(-1, 2, 2)
+        inv /= det[ok, None, None]
+        coef = np.matmul(off[ok], np.matmul(inv, e[ok]).transpose(0, 2, 1))  # (k, P, 2): (EᵀE)⁻¹ Eᵀ (a − S)
+        step = np.matmul(coef, uv[ok, 1:] - uv[ok, :1])
+        moved = evaluate((pts_uv.reshape(len(uv), -1, 2)[ok] + step).reshape(-1, 2)).reshape(step.shape[:2] + (3,))
+        best[ok] = np.minimum(best[ok], norms(moved - a[ok]))
+    return best.max(axis=1)
+
+
 def triangle_chordal_error(
     corners: np.ndarray, uv: np.ndarray, surface: Surface | Callable[[np.ndarray], np.ndarray], order: int = 6,
     affine: bool = False, stop: float = np.inf,
 ) -> np.ndarray:
-    """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v);
+    """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v), and where surface.folds
+    at least _offset_bound's bound of the triangle's own points' distance from the surface;
     corners (m, 3, 3) mm, uv (m, 3, 2) on `surface` (a Surface, or its evaluate: (N, 2) → (N, 3)). Zero-area: 0.
     affine=True (planes): the corner bound of affine_chordal_bound instead of sampling. A Surface with a closed
     form or B-spline data is measured by the compiled kernel on large calls (same samples, same result); it may
@@ -205,7 +229,8 @@ def triangle_chordal_error(
     if affine:
         return affine_chordal_bound(corners, uv, evaluate)
     w = barycentric_grid(order)
-    if isinstance(surface, Surface):
+    folds = isinstance(surface, Surface) and bool(surface.folds)
+    if isinstance(surface, Surface) and not folds:
         fast = _compiled(surface, corners, uv, _interior_first(order) if stop < np.inf else w, stop)
         if fast is not None:
             return fast
@@ -218,6 +243,7 @@ def triangle_chordal_error(
         sl = slice(s, s + step)
         pts_uv = np.einsum("pk,mkd->mpd", w, uv[sl]).reshape(-1, 2)
         xyz = evaluate(pts_uv).reshape(-1, len(w), 3)
-        d = np.einsum("mpd,md->mp", xyz - corners[sl, None, 0], unit[sl])
-        out[sl] = np.abs(d).max(axis=1)
+        out[sl] = np.abs(np.einsum("mpd,md->mp", xyz - corners[sl, None, 0], unit[sl])).max(axis=1)
+        if folds:  # near a fold a triangle's own points may be far from the surface with S(u,v) near its plane
+            out[sl] = np.maximum(out[sl], _offset_bound(corners[sl], uv[sl], w, pts_uv, xyz, evaluate))
     return out
