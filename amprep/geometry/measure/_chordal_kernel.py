@@ -33,6 +33,15 @@ def _distance(c, nx, ny, nz, xyz):
     return abs((xyz[0] - c[0, 0]) * nx + (xyz[1] - c[0, 1]) * ny + (xyz[2] - c[0, 2]) * nz)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _offset2(c, w, p, xyz):
+    """|xyz − a_p|² with a_p = Σ_k w[p,k] c[k], the grid point on the triangle."""
+    dx = xyz[0] - (w[p, 0] * c[0, 0] + w[p, 1] * c[1, 0] + w[p, 2] * c[2, 0])
+    dy = xyz[1] - (w[p, 0] * c[0, 1] + w[p, 1] * c[1, 1] + w[p, 2] * c[2, 1])
+    dz = xyz[2] - (w[p, 0] * c[0, 2] + w[p, 1] * c[1, 2] + w[p, 2] * c[2, 2])
+    return dx * dx + dy * dy + dz * dz
+
+
 #: triangles per block of the parallel B-spline kernel; calls of at most one block (and every analytic call of at
 #: most this many) run the serial kernels: a parallel launch costs ~0.1 ms
 BLOCK = 1024
@@ -79,8 +88,9 @@ def _revolved(kind, prm, u, v, cu, su, cv, sv, sin_b, cos_b):
 
 
 @njit(cache=True, nogil=True)
-def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, start, end):
-    """out[start:end] of analytic_chordal_kernel; a revolved surface's sin and cos from _turns' tables."""
+def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, start, end):
+    """out[start:end] and off[start:end] of analytic_chordal_kernel; a revolved surface's sin and cos from _turns'
+    tables."""
     cu, su, cv, sv = np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1))
     turn_u = kind != PLANE
     turn_v = kind == SPHERE or kind == TORUS
@@ -89,7 +99,7 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, start, end):
     for m in range(start, end):
         c = corners[m]
         nx, ny, nz, ok = _unit_normal(c)
-        best = 0.0
+        best = whole = 0.0
         if ok:
             if turn_u:
                 _turns(au, m, k, cu, su)
@@ -100,35 +110,38 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, start, end):
                 i, j = ij[p, 0], ij[p, 1]
                 xyz = _revolved(kind, prm, u, v, cu[i, j], su[i, j], cv[i, j], sv[i, j], sin_b, cos_b)
                 best = max(best, _distance(c, nx, ny, nz, xyz))
+                whole = max(whole, _offset2(c, w, p, xyz))
                 if best > stop:
                     break
         out[m] = best
+        off[m] = np.sqrt(whole)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def analytic_chordal_kernel(kind, prm, corners, uv, w, ij, k, stop, out):
-    """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m|; corners (M,3,3), uv (M,3,2), w (P,3) the order-k
-    grid, ij (P, 2) its points' (i, j) = k·w[:, :2]; a triangle's points stop at the first over `stop` (out[m] is then a
-    value > stop, not the maximum)."""
+def analytic_chordal_kernel(kind, prm, corners, uv, w, ij, k, stop, out, off):
+    """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m| and off[m] = max_p |S(…) − Σ_k w[p,k] corners[m,k]|
+    (0 for a zero-area triangle); corners (M,3,3), uv (M,3,2), w (P,3) the order-k grid, ij (P, 2) its points'
+    (i, j) = k·w[:, :2]; a triangle's points stop at the first over `stop` (out[m] is then a value > stop, not the
+    maximum, and off[m] the maximum so far)."""
     n = corners.shape[0]
     for blk in prange((n + BLOCK - 1) // BLOCK):
-        _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, blk * BLOCK, min(n, (blk + 1) * BLOCK))
+        _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, blk * BLOCK, min(n, (blk + 1) * BLOCK))
 
 
 @njit(cache=True, nogil=True)
-def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, out):
+def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, out, off):
     """analytic_chordal_kernel on the calling thread only."""
-    _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, 0, corners.shape[0])
+    _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, 0, corners.shape[0])
 
 
 @njit(cache=True, nogil=True)
-def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, start, end):
+def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off, start, end):
     work = scratch(udeg, vdeg)
     su = sv = -1
     for m in range(start, end):
         c = corners[m]
         nx, ny, nz, ok = _unit_normal(c)
-        best = 0.0
+        best = whole = 0.0
         if ok:
             for p in range(w.shape[0]):
                 u, v = _sample(w, uv, m, p)
@@ -138,23 +151,25 @@ def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out
                     v = vper[0] + (v - vper[0]) % (vper[1] - vper[0])
                 x, y, z, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, u, v, work, su, sv)
                 best = max(best, _distance(c, nx, ny, nz, (x, y, z)))
+                whole = max(whole, _offset2(c, w, p, (x, y, z)))
                 if best > stop:
                     break
         out[m] = best
+        off[m] = np.sqrt(whole)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def bspline_chordal_kernel(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
+def bspline_chordal_kernel(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off):
     """The same for a rational B-spline (poles·weights | weights (nu, nv, 4); ub, vb: each direction's knots and the
     Bernstein forms of its basis, _bspline_kernel.point_kernel's); a periodic direction's parameter is wrapped into
     [uper[0], uper[1]) (uper[1] ≤ uper[0]: not periodic)."""
     n = corners.shape[0]
     for blk in prange((n + BLOCK - 1) // BLOCK):
-        _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, blk * BLOCK,
+        _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off, blk * BLOCK,
                        min(n, (blk + 1) * BLOCK))
 
 
 @njit(cache=True, nogil=True)
-def bspline_chordal_serial(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out):
+def bspline_chordal_serial(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off):
     """bspline_chordal_kernel on the calling thread only."""
-    _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, 0, corners.shape[0])
+    _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off, 0, corners.shape[0])

@@ -8,7 +8,7 @@ from functools import lru_cache
 import numpy as np
 
 from amprep.geometry.cad import bspline as _bspline
-from amprep.geometry.cad.surfaces import Surface
+from amprep.geometry.cad.surfaces import Surface, project_points, surface_normals
 from amprep.geometry.core.compiled import compiled, use_compiled
 from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import norms, unit_normals
@@ -142,10 +142,10 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
 
 
 def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray,
-              stop: float = np.inf) -> np.ndarray | None:
-    """ε_T by the fused, threaded kernel of _chordal_kernel.py, or None where the surface has none (OCCT-evaluated
-    kinds) or core.compiled.use_compiled says numpy (the computation's choice, else a call too small to pay numba's
-    start-up), whether or not the kernels are loaded."""
+              stop: float = np.inf) -> tuple[np.ndarray, np.ndarray] | None:
+    """(ε_T, the largest |S(q_p) − a_p|) (m,) each by the fused, threaded kernel of _chordal_kernel.py, or None where
+    the surface has none (OCCT-evaluated kinds) or core.compiled.use_compiled says numpy (the computation's choice,
+    else a call too small to pay numba's start-up), whether or not the kernels are loaded."""
     kind = surface.closed_form
     d = surface.data if surface.surface_type in ("bspline", "bezier") else None
     if kind is None and d is None:
@@ -155,27 +155,27 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
     if _kernels is None:
         load_kernels()
     assert _kernels is not None
-    out = np.empty(len(corners))
+    out, off = np.empty(len(corners)), np.empty(len(corners))
     corners = np.ascontiguousarray(corners, dtype=np.float64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     for s in range(0, len(corners), CALL_TRIANGLES):  # bounded calls: a cancel or time limit seen between them
         if s:
             checkpoint()
         sl = slice(s, s + CALL_TRIANGLES)
-        _kernel_call(kind, d, corners[sl], uv[sl], w, stop, out[sl])
-    return out
+        _kernel_call(kind, d, corners[sl], uv[sl], w, stop, out[sl], off[sl])
+    return out, off
 
 
 def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: np.ndarray,  # type: ignore[type-arg]
-                 uv: np.ndarray, w: np.ndarray, stop: float, out: np.ndarray) -> None:
-    """One call of the analytic (`kind`) or B-spline (`d`) chordal kernel, writing `out` (m,)."""
+                 uv: np.ndarray, w: np.ndarray, stop: float, out: np.ndarray, off: np.ndarray) -> None:
+    """One call of the analytic (`kind`) or B-spline (`d`) chordal kernel, writing `out` and `off` (m,)."""
     assert _kernels is not None
     serial = len(corners) <= _kernels.BLOCK
     if kind is not None:
         fn = _kernels.analytic_chordal_serial if serial else _kernels.analytic_chordal_kernel
         k = _grid_order(len(w))
         ij = np.ascontiguousarray(np.rint(w[:, :2] * k), dtype=np.int64)
-        fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), out)
+        fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), out, off)
         return
     assert d is not None
     if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
@@ -185,12 +185,50 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
     ub, vb = _bspline.kernel_bases(d, d["uknots"], int(d["udeg"]), d["vknots"], int(d["vdeg"]), d["_pw"].shape[:2])
     fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
     fn(d["_pw"], ub, vb, int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w),
-       float(stop), out)
+       float(stop), out, off)
+
+
+#: a triangle whose grid points lie over TILT_SCREEN × its measured error from S at their (u,v) has its tilt
+#: checked; one whose normal is over TILT_MAX (60°) off the surface's is measured by its points' distance from it
+TILT_SCREEN, TILT_MAX = 2.0, np.cos(np.radians(60.0))
+#: Gauss–Newton steps toward a grid point's foot on the surface in tilted_bound
+TILT_STEPS = 8
+
+
+def tilted_bound(corners: np.ndarray, uv: np.ndarray, surface: Surface, w: np.ndarray, err: np.ndarray,
+                 off: np.ndarray) -> np.ndarray:
+    """(m,) err raised, for the triangles standing on the surface (normal over 60° off the surface's at their (u,v)
+    centroid; screened by off (m,), the largest |S(q_p) − a_p| of their grid points, over TILT_SCREEN × err), to the
+    largest of their grid points' distances from a surface point: the least of |S(q_p) − a_p|, _offset_bound's step
+    and TILT_STEPS of Gauss–Newton from q_p, each an upper bound. Such a triangle (three points of one cross-section
+    of a fillet, say) holds S(u,v) in its own plane, where err, the distance along its normal, does not see it leave."""
+    suspect = np.flatnonzero(off > TILT_SCREEN * err)
+    if len(suspect):
+        unit = unit_normals(corners[suspect])[0]
+        facing = np.abs((surface_normals(surface, uv[suspect].mean(axis=1)) * unit).sum(axis=1))
+        suspect = suspect[(facing < TILT_MAX) & (norms(unit) > 0)]
+    if not len(suspect):
+        return err
+    out = err.copy()
+    step = max(1, _CHUNK_POINTS // (5 * TILT_STEPS * len(w)))  # S and its central differences each Gauss–Newton step
+    for s in range(0, len(suspect), step):
+        if s:
+            checkpoint()
+        t = suspect[s:s + step]
+        pts_uv = np.matmul(w, uv[t]).reshape(-1, 2)
+        xyz = surface.evaluate(pts_uv).reshape(len(t), -1, 3)
+        near = _offset_bound(corners[t], uv[t], w, pts_uv, xyz, surface.evaluate).reshape(-1)
+        far = np.flatnonzero(near > np.repeat(err[t], len(w)))  # only these can raise err
+        if len(far):
+            a = np.matmul(w, corners[t]).reshape(-1, 3)[far]
+            near[far] = np.minimum(near[far], project_points(surface, a, pts_uv[far], iterations=TILT_STEPS)[1])
+        out[t] = np.maximum(out[t], near.reshape(len(t), -1).max(axis=1))
+    return out
 
 
 def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np.ndarray, xyz: np.ndarray,
                   evaluate: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    """(m,) max_p min(|S(q_p) − a_p|, |S(q_p + δ_p) − a_p|): each grid point a_p of a triangle against two surface
+    """(m, P) min(|S(q_p) − a_p|, |S(q_p + δ_p) − a_p|): each grid point a_p of a triangle against two surface
     points, so an upper bound of its distance from the surface; q_p its (u,v) (pts_uv (m·P, 2), S there xyz
     (m, P, 3)), δ_p = U (EᵀE)⁻¹ Eᵀ (a_p − S(q_p)) the step that the triangle's own affine map (edges E (m, 2, 3) over
     (u,v) edges U) takes to a_p: it removes the parametrisation's tangential drift, which is no distance."""
@@ -208,15 +246,16 @@ def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np
         step = np.matmul(coef, uv[ok, 1:] - uv[ok, :1])
         moved = evaluate((pts_uv.reshape(len(uv), -1, 2)[ok] + step).reshape(-1, 2)).reshape(step.shape[:2] + (3,))
         best[ok] = np.minimum(best[ok], norms(moved - a[ok]))
-    return best.max(axis=1)
+    return best
 
 
 def triangle_chordal_error(
     corners: np.ndarray, uv: np.ndarray, surface: Surface | Callable[[np.ndarray], np.ndarray], order: int = 6,
     affine: bool = False, stop: float = np.inf,
 ) -> np.ndarray:
-    """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v), and where surface.folds
-    at least _offset_bound's bound of the triangle's own points' distance from the surface;
+    """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v); on a Surface raised, for
+    triangles standing over 60° off it (tilted_bound) and on faces with a fold (surface.folds, _offset_bound), to an
+    upper bound of the triangle's own points' distance from it;
     corners (m, 3, 3) mm, uv (m, 3, 2) on `surface` (a Surface, or its evaluate: (N, 2) → (N, 3)). Zero-area: 0.
     affine=True (planes): the corner bound of affine_chordal_bound instead of sampling. A Surface with a closed
     form or B-spline data is measured by the compiled kernel on large calls (same samples, same result); it may
@@ -233,9 +272,18 @@ def triangle_chordal_error(
     if isinstance(surface, Surface) and not folds:
         fast = _compiled(surface, corners, uv, _interior_first(order) if stop < np.inf else w, stop)
         if fast is not None:
-            return fast
-    unit = unit_normals(corners)[0]
-    out = np.empty(m)
+            return tilted_bound(corners, uv, surface, w, *fast)
+    out, off = _sampled(corners, uv, evaluate, w, folds)
+    return tilted_bound(corners, uv, surface, w, out, off) if isinstance(surface, Surface) else out
+
+
+def _sampled(corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray], np.ndarray], w: np.ndarray,
+             folds: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) triangle_chordal_error's measure in numpy, in chunks of _CHUNK_POINTS points, and (m,) the largest
+    |S(q_p) − a_p| of each triangle's grid points (0 for a zero-area triangle), as the compiled kernels give."""
+    m = len(corners)
+    unit, area = unit_normals(corners)
+    out, off = np.empty(m), np.empty(m)
     step = max(1, _CHUNK_POINTS // len(w))
     for s in range(0, m, step):
         if s:
@@ -244,6 +292,7 @@ def triangle_chordal_error(
         pts_uv = np.einsum("pk,mkd->mpd", w, uv[sl]).reshape(-1, 2)
         xyz = evaluate(pts_uv).reshape(-1, len(w), 3)
         out[sl] = np.abs(np.einsum("mpd,md->mp", xyz - corners[sl, None, 0], unit[sl])).max(axis=1)
+        off[sl] = np.where(area[sl] > 0, norms(xyz - np.matmul(w, corners[sl])).max(axis=1), 0.0)
         if folds:  # near a fold a triangle's own points may be far from the surface with S(u,v) near its plane
-            out[sl] = np.maximum(out[sl], _offset_bound(corners[sl], uv[sl], w, pts_uv, xyz, evaluate))
-    return out
+            out[sl] = np.maximum(out[sl], _offset_bound(corners[sl], uv[sl], w, pts_uv, xyz, evaluate).max(axis=1))
+    return out, off
