@@ -65,7 +65,7 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
             with compiled(True):  # every call of any size takes the compiled path
                 fast = chordal._compiled(surf, corners, uv, w)
             with compiled(False):
-                slow = chordal._sampled(corners, uv, surf.evaluate, w, False)
+                slow = chordal._sampled(corners, uv, surf.evaluate, w, None)
             if surf.surface_type in ("plane", "cylinder", "cone", "sphere", "torus", "bspline"):
                 assert fast is not None
                 kinds.add(surf.surface_type)
@@ -96,7 +96,7 @@ def test_the_compiled_kernels_turn_tables_keep_large_triangles_exact(kind):
         with compiled(True):
             fast = chordal._compiled(surf, corners, uv, barycentric_grid(order))
         with compiled(False):
-            slow = chordal._sampled(corners, uv, surf.evaluate, barycentric_grid(order), False)
+            slow = chordal._sampled(corners, uv, surf.evaluate, barycentric_grid(order), None)
         assert fast is not None
         for a, b in zip(fast, slow, strict=True):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)

@@ -95,3 +95,46 @@ def test_the_quality_meshers_top_keeps_the_tolerance_by_occts_own_distance():
         if projection.NbPoints():
             d[i] = min(d[i], projection.LowerDistance())
     assert d.max() <= 1.01 * tol, d.max() / tol
+
+
+@pytest.mark.parametrize("kernels", [False, True])
+def test_a_triangle_degenerate_in_space_is_never_measured_outside_its_face(kernels: bool):
+    """Triangles at the pole of a NURBS sphere whose two pole corners are 1e-12 mm apart but a tenth of the face
+    apart in u, the third corner 0.3 mm off the surface, so that they stand across it: the affine step of the
+    distance bound divides by those 1e-12 mm, and stepped to u ~ 1e11 before, where a rational B-spline's
+    denominator can vanish (a ZeroDivisionError in the compiled evaluator killed a meshing worker on OCCT's top).
+    Every (u,v) the measure evaluates stays within one extent of the face's box, and each result is finite."""
+    import dataclasses
+
+    import cadquery as cq
+
+    shape = BRepBuilderAPI_NurbsConvert(cq.Solid.makeSphere(10.0).wrapped, True).Shape()
+    surface = surface_of(model_from_shape(shape).faces[0])
+    assert surface.surface_type == "bspline" and surface.bounds is not None
+    u1, u2, v1, v2 = surface.bounds
+    seen: list[np.ndarray] = []
+
+    def recording(uv: np.ndarray) -> np.ndarray:
+        seen.append(np.array(uv, dtype=float).reshape(-1, 2))
+        return surface.evaluate(uv)
+
+    watched = dataclasses.replace(surface, evaluate=recording)
+    pole = v1 if np.ptp(surface.evaluate(np.array([[u1, v1], [(u1 + u2) / 2, v1]])), axis=0).max() < 1e-9 else v2
+    rng = np.random.default_rng(5)
+    n = 60
+    u0 = rng.uniform(u1, u2 - 0.1 * (u2 - u1), n)
+    inner = pole + np.sign((v1 + v2) / 2 - pole) * rng.uniform(0.05, 0.2, n) * (v2 - v1)
+    uv = np.stack([np.stack([u0, np.full(n, pole)], 1), np.stack([u0 + 0.05 * (u2 - u1), inner], 1),
+                   np.stack([u0 + 0.1 * (u2 - u1), np.full(n, pole)], 1)], axis=1)
+    corners = surface.evaluate(uv.reshape(-1, 2)).reshape(n, 3, 3)
+    corners[:, 1] *= 1.0 + 0.3 / 10.0  # 0.3 mm out along the sphere's normal
+    corners[:, 2] = corners[:, 0] + 1e-12 * rng.normal(size=(n, 3))
+    if kernels:
+        chordal.load_kernels()
+    with compiled(kernels):
+        measured = triangle_chordal_error(corners, uv, watched)
+    assert seen
+    at = np.concatenate(seen)
+    extent = np.array([u2 - u1, v2 - v1])
+    assert np.all(at >= np.array([u1, v1]) - extent) and np.all(at <= np.array([u2, v2]) + extent), (at.min(0), at.max(0))
+    assert np.all(np.isfinite(measured)) and np.all(measured >= 0)

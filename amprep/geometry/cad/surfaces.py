@@ -72,6 +72,19 @@ def uv_extent(surface: Surface) -> np.ndarray:
     return np.array([max(u2 - u1, 1e-9), max(v2 - v1, 1e-9)])
 
 
+def parameter_box(surface: Surface) -> tuple[np.ndarray, np.ndarray]:
+    """((2,) low, (2,) high) (u,v) of the face's bounds (to 1e-9 of its extent) in each non-periodic parameter, ±inf
+    in a periodic or unbounded one: where S is the face's surface (a B-spline past its knots is an extrapolation)."""
+    lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
+    if surface.bounds is not None:
+        span = uv_extent(surface)
+        u1, u2, v1, v2 = surface.bounds
+        for k, (a, b) in enumerate(((u1, u2), (v1, v2))):
+            if not surface.periods[k] and np.isfinite(a) and np.isfinite(b):
+                lo[k], hi[k] = a - 1e-9 * span[k], b + 1e-9 * span[k]
+    return lo, hi
+
+
 def tangents(surface: Surface, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(S_u, S_v) (n, 3) each at (n, 2) uv, by central differences of 1e-6 × uv_extent."""
     h = 1e-6 * uv_extent(surface)
@@ -102,21 +115,20 @@ def project_points(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterat
 def project_settled(surface: Surface, points: np.ndarray, uv0: np.ndarray, iterations: int = 12,
                     within: bool = False, settle: float = 1e-12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """project_points' ((n, 2) uv, (n,) distance) and (n,) bool: the points whose last step moved them by under
-    `settle` × the extent (the others ran out of iterations: bouncing off an apex the bounds hold them at, say)."""
+    `settle` × the extent (the others ran out of iterations: bouncing off an apex the bounds hold them at, say). Each
+    point stops at its own settling, so its result does not depend on the other points of the call."""
     uv = np.array(uv0, dtype=float)
     last = np.zeros(len(uv))
     span = uv_extent(surface)
-    lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
-    if within and surface.bounds is not None:
-        u1, u2, v1, v2 = surface.bounds
-        for k, (a, b) in enumerate(((u1, u2), (v1, v2))):
-            if not surface.periods[k] and np.isfinite(a) and np.isfinite(b):
-                lo[k], hi[k] = a - 1e-9 * span[k], b + 1e-9 * span[k]
+    lo, hi = parameter_box(surface) if within else (np.full(2, -np.inf), np.full(2, np.inf))
     uv = np.clip(uv, lo, hi)
+    live = np.arange(len(uv))
     for _ in range(iterations):
-        s = surface.evaluate(uv)
-        su, sv = tangents(surface, uv)
-        r = s - points
+        if not len(live):
+            break
+        q = uv[live]
+        su, sv = tangents(surface, q)
+        r = surface.evaluate(q) - points[live]
         a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
         gu, gv = (su * r).sum(1), (sv * r).sum(1)
         det = a * c - b * b
@@ -125,10 +137,10 @@ def project_settled(surface: Surface, points: np.ndarray, uv0: np.ndarray, itera
         dv = np.where(ok, -(a * gv - b * gu) / np.where(ok, det, 1), 0.0)
         step = np.stack([du, dv], 1)
         limit = 0.25 * span  # no jumps across the domain from a bad start
-        new = np.clip(uv + np.clip(step, -limit, limit), lo, hi)
-        last, uv = np.abs((new - uv) / span).max(axis=1, initial=0), new
-        if last.max(initial=0) < settle:  # the step taken: a point held at its face's bounds asks to go on out
-            break
+        new = np.clip(q + np.clip(step, -limit, limit), lo, hi)
+        last[live] = np.abs((new - q) / span).max(axis=1, initial=0)
+        uv[live] = new
+        live = live[last[live] >= settle]  # the step taken: a point held at its face's bounds asks to go on out
     return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1), last < settle
 
 

@@ -8,7 +8,7 @@ from functools import lru_cache
 import numpy as np
 
 from amprep.geometry.cad import bspline as _bspline
-from amprep.geometry.cad.surfaces import Surface, project_points, surface_normals
+from amprep.geometry.cad.surfaces import Surface, parameter_box, project_points, surface_normals
 from amprep.geometry.core.compiled import compiled, use_compiled
 from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import norms, unit_normals
@@ -210,6 +210,7 @@ def tilted_bound(corners: np.ndarray, uv: np.ndarray, surface: Surface, w: np.nd
     if not len(suspect):
         return err
     out = err.copy()
+    box = parameter_box(surface)
     step = max(1, _CHUNK_POINTS // (5 * TILT_STEPS * len(w)))  # S and its central differences each Gauss–Newton step
     for s in range(0, len(suspect), step):
         if s:
@@ -217,34 +218,40 @@ def tilted_bound(corners: np.ndarray, uv: np.ndarray, surface: Surface, w: np.nd
         t = suspect[s:s + step]
         pts_uv = np.matmul(w, uv[t]).reshape(-1, 2)
         xyz = surface.evaluate(pts_uv).reshape(len(t), -1, 3)
-        near = _offset_bound(corners[t], uv[t], w, pts_uv, xyz, surface.evaluate).reshape(-1)
+        near = _offset_bound(corners[t], uv[t], w, pts_uv, xyz, surface.evaluate, box).reshape(-1)
         far = np.flatnonzero(near > np.repeat(err[t], len(w)))  # only these can raise err
         if len(far):
             a = np.matmul(w, corners[t]).reshape(-1, 3)[far]
-            near[far] = np.minimum(near[far], project_points(surface, a, pts_uv[far], iterations=TILT_STEPS)[1])
+            foot = project_points(surface, a, pts_uv[far], iterations=TILT_STEPS, within=True)[1]
+            near[far] = np.minimum(near[far], foot)
         out[t] = np.maximum(out[t], near.reshape(len(t), -1).max(axis=1))
     return out
 
 
 def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np.ndarray, xyz: np.ndarray,
-                  evaluate: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+                  evaluate: Callable[[np.ndarray], np.ndarray], box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """(m, P) min(|S(q_p) − a_p|, |S(q_p + δ_p) − a_p|): each grid point a_p of a triangle against two surface
     points, so an upper bound of its distance from the surface; q_p its (u,v) (pts_uv (m·P, 2), S there xyz
     (m, P, 3)), δ_p = U (EᵀE)⁻¹ Eᵀ (a_p − S(q_p)) the step that the triangle's own affine map (edges E (m, 2, 3) over
-    (u,v) edges U) takes to a_p: it removes the parametrisation's tangential drift, which is no distance."""
+    (u,v) edges U) takes to a_p: it removes the parametrisation's tangential drift, which is no distance. Taken only
+    where E is well conditioned (|E₁ × E₂|² > 1e-12 (|E₁|² + |E₂|²)²) and (EᵀE)⁻¹ Eᵀ (a − S) is within ±1 (a step of
+    at most the triangle's own (u,v) edges), then clipped to the face's parameter box (surfaces.parameter_box):
+    a triangle degenerate in space but not in (u,v), at a pole, would otherwise step to u ~ 1e12."""
     a = np.matmul(w, corners)  # (m, P, 3)
     off = a - xyz
     best = norms(off)
     e = corners[:, 1:] - corners[:, :1]
     g = np.matmul(e, e.transpose(0, 2, 1))  # EᵀE (m, 2, 2)
     det = g[:, 0, 0] * g[:, 1, 1] - g[:, 0, 1] * g[:, 1, 0]
-    ok = np.flatnonzero(det > 1e-24 * np.maximum(g[:, 0, 0] * g[:, 1, 1], 1e-300))
+    ok = np.flatnonzero(det > 1e-12 * np.maximum((g[:, 0, 0] + g[:, 1, 1]) ** 2, 1e-300))
     if len(ok):
         inv = np.stack([g[ok, 1, 1], -g[ok, 0, 1], -g[ok, 1, 0], g[ok, 0, 0]], axis=1).reshape(-1, 2, 2)
         inv /= det[ok, None, None]
         coef = np.matmul(off[ok], np.matmul(inv, e[ok]).transpose(0, 2, 1))  # (k, P, 2): (EᵀE)⁻¹ Eᵀ (a − S)
-        step = np.matmul(coef, uv[ok, 1:] - uv[ok, :1])
-        moved = evaluate((pts_uv.reshape(len(uv), -1, 2)[ok] + step).reshape(-1, 2)).reshape(step.shape[:2] + (3,))
+        small = np.abs(coef).max(axis=2) <= 1.0  # (k, P)
+        step = np.matmul(np.where(small[..., None], coef, 0.0), uv[ok, 1:] - uv[ok, :1])
+        to = np.clip(pts_uv.reshape(len(uv), -1, 2)[ok] + step, *box)
+        moved = evaluate(to.reshape(-1, 2)).reshape(step.shape[:2] + (3,))
         best[ok] = np.minimum(best[ok], norms(moved - a[ok]))
     return best
 
@@ -268,8 +275,8 @@ def triangle_chordal_error(
     if affine:
         return affine_chordal_bound(corners, uv, evaluate)
     w = barycentric_grid(order)
-    folds = isinstance(surface, Surface) and bool(surface.folds)
-    if isinstance(surface, Surface) and not folds:
+    folds = parameter_box(surface) if isinstance(surface, Surface) and surface.folds else None
+    if isinstance(surface, Surface) and folds is None:
         fast = _compiled(surface, corners, uv, _interior_first(order) if stop < np.inf else w, stop)
         if fast is not None:
             return tilted_bound(corners, uv, surface, w, *fast)
@@ -278,9 +285,10 @@ def triangle_chordal_error(
 
 
 def _sampled(corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray], np.ndarray], w: np.ndarray,
-             folds: bool) -> tuple[np.ndarray, np.ndarray]:
+             folds: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
     """(m,) triangle_chordal_error's measure in numpy, in chunks of _CHUNK_POINTS points, and (m,) the largest
-    |S(q_p) − a_p| of each triangle's grid points (0 for a zero-area triangle), as the compiled kernels give."""
+    |S(q_p) − a_p| of each triangle's grid points (0 for a zero-area triangle), as the compiled kernels give; on a
+    face with a fold (`folds`: its parameter box), raised to _offset_bound's."""
     m = len(corners)
     unit, area = unit_normals(corners)
     out, off = np.empty(m), np.empty(m)
@@ -293,6 +301,6 @@ def _sampled(corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray
         xyz = evaluate(pts_uv).reshape(-1, len(w), 3)
         out[sl] = np.abs(np.einsum("mpd,md->mp", xyz - corners[sl, None, 0], unit[sl])).max(axis=1)
         off[sl] = np.where(area[sl] > 0, norms(xyz - np.matmul(w, corners[sl])).max(axis=1), 0.0)
-        if folds:  # near a fold a triangle's own points may be far from the surface with S(u,v) near its plane
-            out[sl] = np.maximum(out[sl], _offset_bound(corners[sl], uv[sl], w, pts_uv, xyz, evaluate).max(axis=1))
+        if folds is not None:  # near a fold a triangle's own points may be far from the surface with S(u,v) near its plane
+            out[sl] = np.maximum(out[sl], _offset_bound(corners[sl], uv[sl], w, pts_uv, xyz, evaluate, folds).max(axis=1))
     return out, off
