@@ -93,6 +93,14 @@ def tangents(surface: Surface, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (s[:n] - s[n:2 * n]) / (2 * h[0]), (s[2 * n:3 * n] - s[3 * n:]) / (2 * h[1])
 
 
+def value_and_tangents(surface: Surface, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S, S_u, S_v) (n, 3) each at (n, 2) uv, tangents as `tangents` gives them, from one evaluation of 5n points."""
+    h = 1e-6 * uv_extent(surface)
+    n = len(uv)
+    s = surface.evaluate(np.concatenate([uv, uv + [h[0], 0], uv - [h[0], 0], uv + [0, h[1]], uv - [0, h[1]]]))
+    return s[:n], (s[n:2 * n] - s[2 * n:3 * n]) / (2 * h[0]), (s[3 * n:4 * n] - s[4 * n:]) / (2 * h[1])
+
+
 def surface_normals(surface: Surface, uv: np.ndarray) -> np.ndarray:
     """(n, 3) unit normals S_u × S_v / |S_u × S_v| at (n, 2) uv; zero where the two are parallel (a pole, an apex)."""
     su, sv = tangents(surface, np.asarray(uv, float))
@@ -127,8 +135,8 @@ def project_settled(surface: Surface, points: np.ndarray, uv0: np.ndarray, itera
         if not len(live):
             break
         q = uv[live]
-        su, sv = tangents(surface, q)
-        r = surface.evaluate(q) - points[live]
+        at, su, sv = value_and_tangents(surface, q)
+        r = at - points[live]
         a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
         gu, gv = (su * r).sum(1), (sv * r).sum(1)
         det = a * c - b * b

@@ -188,20 +188,28 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
        float(stop), out, off)
 
 
-#: a triangle whose grid points lie over TILT_SCREEN × its measured error from S at their (u,v) has its tilt
-#: checked; one whose normal is over TILT_MAX (60°) off the surface's is measured by its points' distance from it
-TILT_SCREEN, TILT_MAX = 2.0, np.cos(np.radians(60.0))
-#: Gauss–Newton steps toward a grid point's foot on the surface in tilted_bound
-TILT_STEPS = 8
+#: a triangle whose normal is over 10° off the surface's (|cos| under TILT_MAX) is also measured by its points' distance
+#: from it; screened by its grid points lying over TILT_SCREEN = 1 / TILT_MAX × its measured error from S at their
+#: (u,v), which every such triangle whose deviation lies along the surface's normal does. A triangle not screened is
+#: measured to at least cos 10° of its points' distance (|S(q) − a| bounds it); at 60° (until 2026-11) the measure saw
+#: intermediate meshes' triangles 12–19° off at a twentieth to a third of their true distance (OCCT's top, default
+#: mesher, by OCCT's own distance)
+TILT_MAX = float(np.cos(np.radians(10.0)))
+TILT_SCREEN = 1.0 / TILT_MAX
+#: Gauss–Newton steps toward a grid point's foot on the surface in tilted_bound, each point stopping once its step is
+#: under TILT_SETTLE × the face's (u,v) extent (the distance to any surface point is an upper bound: a nearer foot
+#: only makes it tighter, by the square of the step)
+TILT_STEPS, TILT_SETTLE = 8, 1e-9
 
 
 def tilted_bound(corners: np.ndarray, uv: np.ndarray, surface: Surface, w: np.ndarray, err: np.ndarray,
                  off: np.ndarray) -> np.ndarray:
-    """(m,) err raised, for the triangles standing on the surface (normal over 60° off the surface's at their (u,v)
+    """(m,) err raised, for the triangles tilted on the surface (normal over 10° off the surface's at their (u,v)
     centroid; screened by off (m,), the largest |S(q_p) − a_p| of their grid points, over TILT_SCREEN × err), to the
     largest of their grid points' distances from a surface point: the least of |S(q_p) − a_p|, _offset_bound's step
-    and TILT_STEPS of Gauss–Newton from q_p, each an upper bound. Such a triangle (three points of one cross-section
-    of a fillet, say) holds S(u,v) in its own plane, where err, the distance along its normal, does not see it leave."""
+    and TILT_STEPS of Gauss–Newton from q_p, each an upper bound. err, the distance along a triangle's normal, sees
+    its points' offset to the cosine of its tilt, and not at all where the triangle holds S(u,v) in its own plane
+    (three points of one cross-section of a fillet, a needle beside a boundary chord off its face)."""
     suspect = np.flatnonzero(off > TILT_SCREEN * err)
     if len(suspect):
         unit = unit_normals(corners[suspect])[0]
@@ -218,20 +226,23 @@ def tilted_bound(corners: np.ndarray, uv: np.ndarray, surface: Surface, w: np.nd
         t = suspect[s:s + step]
         pts_uv = np.matmul(w, uv[t]).reshape(-1, 2)
         xyz = surface.evaluate(pts_uv).reshape(len(t), -1, 3)
-        near = _offset_bound(corners[t], uv[t], w, pts_uv, xyz, surface.evaluate, box).reshape(-1)
+        near, nearest = _offset_bound(corners[t], uv[t], w, pts_uv, xyz, surface.evaluate, box)
+        near = near.reshape(-1)
         far = np.flatnonzero(near > np.repeat(err[t], len(w)))  # only these can raise err
         if len(far):
             a = np.matmul(w, corners[t]).reshape(-1, 3)[far]
-            foot = project_points(surface, a, pts_uv[far], iterations=TILT_STEPS, within=True)[1]
+            foot = project_points(surface, a, nearest[far], iterations=TILT_STEPS, within=True, settle=TILT_SETTLE)[1]
             near[far] = np.minimum(near[far], foot)
         out[t] = np.maximum(out[t], near.reshape(len(t), -1).max(axis=1))
     return out
 
 
 def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np.ndarray, xyz: np.ndarray,
-                  evaluate: Callable[[np.ndarray], np.ndarray], box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """(m, P) min(|S(q_p) − a_p|, |S(q_p + δ_p) − a_p|): each grid point a_p of a triangle against two surface
-    points, so an upper bound of its distance from the surface; q_p its (u,v) (pts_uv (m·P, 2), S there xyz
+                  evaluate: Callable[[np.ndarray], np.ndarray],
+                  box: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """((m, P) min(|S(q_p) − a_p|, |S(q_p + δ_p) − a_p|), (m·P, 2) the (u,v) of the nearer): each grid point a_p of a
+    triangle against two surface points, so an upper bound of its distance from the surface; q_p its (u,v) (pts_uv
+    (m·P, 2), S there xyz
     (m, P, 3)), δ_p = U (EᵀE)⁻¹ Eᵀ (a_p − S(q_p)) the step that the triangle's own affine map (edges E (m, 2, 3) over
     (u,v) edges U) takes to a_p: it removes the parametrisation's tangential drift, which is no distance. Taken only
     where E is well conditioned (|E₁ × E₂|² > 1e-12 (|E₁|² + |E₂|²)²) and (EᵀE)⁻¹ Eᵀ (a − S) is within ±1 (a step of
@@ -240,6 +251,7 @@ def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np
     a = np.matmul(w, corners)  # (m, P, 3)
     off = a - xyz
     best = norms(off)
+    nearest = np.array(pts_uv, dtype=float).reshape(len(uv), -1, 2)
     e = corners[:, 1:] - corners[:, :1]
     g = np.matmul(e, e.transpose(0, 2, 1))  # EᵀE (m, 2, 2)
     det = g[:, 0, 0] * g[:, 1, 1] - g[:, 0, 1] * g[:, 1, 0]
@@ -251,9 +263,11 @@ def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np
         small = np.abs(coef).max(axis=2) <= 1.0  # (k, P)
         step = np.matmul(np.where(small[..., None], coef, 0.0), uv[ok, 1:] - uv[ok, :1])
         to = np.clip(pts_uv.reshape(len(uv), -1, 2)[ok] + step, *box)
-        moved = evaluate(to.reshape(-1, 2)).reshape(step.shape[:2] + (3,))
-        best[ok] = np.minimum(best[ok], norms(moved - a[ok]))
-    return best
+        moved = norms(evaluate(to.reshape(-1, 2)).reshape(step.shape[:2] + (3,)) - a[ok])
+        nearer = moved < best[ok]
+        best[ok] = np.where(nearer, moved, best[ok])
+        nearest[ok] = np.where(nearer[..., None], to, nearest[ok])
+    return best, nearest.reshape(-1, 2)
 
 
 def triangle_chordal_error(
@@ -261,7 +275,7 @@ def triangle_chordal_error(
     affine: bool = False, stop: float = np.inf,
 ) -> np.ndarray:
     """(m,) ε_T = max_p |(S(u_p, v_p) − a) · n̂| over the order-k barycentric grid in (u,v); on a Surface raised, for
-    triangles standing over 60° off it (tilted_bound) and on faces with a fold (surface.folds, _offset_bound), to an
+    triangles tilted over 10° on it (tilted_bound) and on faces with a fold (surface.folds, _offset_bound), to an
     upper bound of the triangle's own points' distance from it;
     corners (m, 3, 3) mm, uv (m, 3, 2) on `surface` (a Surface, or its evaluate: (N, 2) → (N, 3)). Zero-area: 0.
     affine=True (planes): the corner bound of affine_chordal_bound instead of sampling. A Surface with a closed
@@ -302,5 +316,5 @@ def _sampled(corners: np.ndarray, uv: np.ndarray, evaluate: Callable[[np.ndarray
         out[sl] = np.abs(np.einsum("mpd,md->mp", xyz - corners[sl, None, 0], unit[sl])).max(axis=1)
         off[sl] = np.where(area[sl] > 0, norms(xyz - np.matmul(w, corners[sl])).max(axis=1), 0.0)
         if folds is not None:  # near a fold a triangle's own points may be far from the surface with S(u,v) near its plane
-            out[sl] = np.maximum(out[sl], _offset_bound(corners[sl], uv[sl], w, pts_uv, xyz, evaluate, folds).max(axis=1))
+            out[sl] = np.maximum(out[sl], _offset_bound(corners[sl], uv[sl], w, pts_uv, xyz, evaluate, folds)[0].max(axis=1))
     return out, off

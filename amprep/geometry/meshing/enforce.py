@@ -94,7 +94,8 @@ class FaceStates:
     compiled: bool = False  # its faces meshed with the compiled kernels, as that estimate decided (_estimate)
     expected: dict[int, float] = field(default_factory=dict)  # that estimate per face, meshed once (_estimate)
     gaps: BrepGaps = field(default_factory=BrepGaps)  # the B-rep's gaps at the faces' boundaries (weld.seat_boundaries)
-    tight: set[int] = field(default_factory=set)  # faces over in two rounds running: meshed to less_gap from then on
+    was_over: set[int] = field(default_factory=set)  # faces over the tolerance in some round so far
+    tight: set[int] = field(default_factory=set)  # faces over in two rounds: meshed to less_gap from then on
     plain: set[int] = field(default_factory=set)  # the quality mesher's faces over in three: the default's mesher then
 
     def __post_init__(self) -> None:
@@ -125,14 +126,17 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
         _measure_moved(f, moved)
         if not f.params.enforce_tolerance or round_ == ENFORCE_ROUNDS:
             break
-        before, over = set(over), [i for i in range(len(f.patches)) if f.patches[i] is not None and len(f.errors[i])
-                                    and np.nanmax(f.errors[i], initial=0) > f.tol * TRIGGER_MARGIN
-                                    and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
+        over = [i for i in range(len(f.patches)) if f.patches[i] is not None and len(f.errors[i])
+                and np.nanmax(f.errors[i], initial=0) > f.tol * TRIGGER_MARGIN
+                and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
         if not over:
             break
-        if f.params.quality:  # over three times running, once to less_gap: the quality mesher cannot, the plain one
+        if f.params.quality:  # over three times, once to less_gap: the quality mesher cannot, the plain one
             _to_plain(f, f.tight.intersection(over))
-        f.tight.update(before.intersection(over))  # over twice running: the B-rep's gap is reckoned with from now
+        # over twice (not only running: a face within once re-meshed can be over again when its neighbours' boundary
+        # nodes move, and so on in turn): the B-rep's gap is reckoned with from now
+        f.tight.update(f.was_over.intersection(over))
+        f.was_over.update(over)
         todo = _split_edges(f, over)
         _mend(f, over, todo)
         for i in todo.union(over):
@@ -200,7 +204,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
 
 
 def _to_plain(f: FaceStates, faces: set[int]) -> None:
-    """The quality mesher's faces over the tolerance in three rounds running (its refinement stopped short and each
+    """The quality mesher's faces over the tolerance in three rounds (its refinement stopped short and each
     round met the same mesh again) meshed from then on as the default mesher meshes its own faces (from the boundary,
     refined alone), and listed in `fallback` as `quality_refinement`."""
     for i in sorted(faces - f.plain):
@@ -376,8 +380,9 @@ def _measure_moved(f: FaceStates, moved: dict[int, np.ndarray]) -> None:
 def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
     """Split the edges of the faces over the tolerance whose own sagitta exceeds the target (a face's boundary chords
     bound its error), less the B-rep's gap along an edge a triangle over the target touches where the face is tight
-    (over two rounds running: the gap, not the sagitta, kept it over; less_gap); the faces of every split edge, to be
-    meshed again."""
+    (over in two rounds: the gap, not the sagitta, kept it over; less_gap): the larger of the edge's gap and the
+    face's (which holds its vertices': a chord from a vertex off the face stands off it by the vertex's gap at that
+    end); the faces of every split edge, to be meshed again."""
     target = f.tol * ENFORCE_MARGIN
     todo: set[int] = set()
     for i in over:
@@ -391,7 +396,8 @@ def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
             before = f.topo.edge_params.get(ei)
             if before is None:
                 continue
-            gap = f.gaps.edge.get(ei, 0.0) if ei in touched and i in f.tight else 0.0
+            # the face's gap, where more than the edge's own: a B-rep vertex's counts at the edges it ends
+            gap = max(f.gaps.edge.get(ei, 0.0), f.gaps.face.get(i, 0.0)) if ei in touched and i in f.tight else 0.0
             after = split_edge_to_tolerance(edge, before, less_gap(target, gap))
             if len(after) != len(before):
                 f.topo.edge_params[ei] = after
