@@ -80,6 +80,8 @@ def main() -> None:
                     "sorted list (a package of thousands, as kicad-packages3d)")
     ap.add_argument("--rerun", help="run only these of --tools; the others' cells are kept from docs/NAME.csv (a "
                     "change that left their output byte-identical); a cell missing there is run")
+    ap.add_argument("--parts", help="with --rerun: a file of part labels (one a line) whose cells of the --rerun tools "
+                    "are run; every other part's are kept too (a change that altered only these parts' output)")
     args = ap.parse_args()
     if args.from_log:
         rows = [json.loads(line) for line in Path(args.from_log).read_text().splitlines() if line.startswith("{")]
@@ -89,7 +91,8 @@ def main() -> None:
     parts = write_built_parts(tmp / "built") if args.built else package_parts(args.package, tmp)
     if 0 < args.sample < len(parts):
         parts = [parts[i] for i in np.linspace(0, len(parts) - 1, args.sample).round().astype(int)]
-    kept = _kept_rows(ROOT / "docs" / f"{args.name}.csv", set(args.rerun.split(","))) if args.rerun else {}
+    only = set(Path(args.parts).read_text().split("\n")) - {""} if args.parts else None
+    kept = _kept_rows(ROOT / "docs" / f"{args.name}.csv", set(args.rerun.split(",")), only) if args.rerun else {}
     rows = []
     for part in parts:
         label = str(part.relative_to(tmp)).replace("tree/usr/share/", "")
@@ -103,17 +106,29 @@ def main() -> None:
     write_tables(rows, args, len(parts))
 
 
+def _rerun_note(args: argparse.Namespace) -> str:
+    """What the header says of a --rerun: which cells were run again."""
+    if not args.rerun:
+        return ""
+    if not args.parts:
+        return f" (then `--rerun {args.rerun}`: the other tools’ cells kept from the run before)"
+    n = len(set(Path(args.parts).read_text().split("\n")) - {""})
+    return (f" (then `--rerun {args.rerun} --parts`: those tools’ cells of the {n} parts whose output a change altered "
+            "run again, every other cell kept from the run before)")
+
+
 _FLOATS = ("tolerance", "seconds", "deviation_ratio", "angle_regularity", "peak_rss_mb")
 _INTS = ("triangles", "boundary", "nonmanifold", "degenerate")
 
 
-def _kept_rows(path: Path, rerun: set[str]) -> dict[tuple[str, float, str], dict]:
-    """{(part, tolerance, tool): row} of an earlier run's CSV for every tool not in `rerun`, each row as run_one's
-    JSON had it (empty fields dropped, numbers and `closed` typed)."""
+def _kept_rows(path: Path, rerun: set[str], only: set[str] | None = None) -> dict[tuple[str, float, str], dict]:
+    """{(part, tolerance, tool): row} of an earlier run's CSV for every tool not in `rerun` (for those, of every
+    part not in `only`, when given), each row as run_one's JSON had it (empty fields dropped, numbers and `closed`
+    typed)."""
     kept = {}
     with open(path, newline="") as fh:
         for r in csv.DictReader(fh):
-            if r["tool"] in rerun:
+            if r["tool"] in rerun and (only is None or r["part"] in only):
                 continue
             row = {k: v for k, v in r.items() if v != ""}
             row.update({k: float(row[k]) for k in _FLOATS if k in row})
@@ -163,7 +178,7 @@ def write_tables(rows: list[dict], args: argparse.Namespace, n_parts: int, compl
              f"Made by `python bench/real_parts.py {source}"
              f"{'' if args.tools == 'amprep,occt-delabella' else f' --tools {args.tools} --name {args.name}'}"
              f"{f' --sample {args.sample}' if args.sample else ''}`"
-             f"{f' (then `--rerun {args.rerun}`: the other tools’ cells kept from the run before)' if args.rerun else ''}"
+             f"{_rerun_note(args)}"
              f": {what} "
              f"({n_parts} {'files' if args.built else 'parts'}{'' if complete else ', those a run stopped early had reached, from its log'}), "
              "converted end to end in a child process per cell by amprep (`amprep-quality`: `--mesher quality`) and by "

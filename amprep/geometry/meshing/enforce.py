@@ -66,8 +66,11 @@ REMESH_PER_FACE = 100
 #: BRepMesh collapses a circle under its minimum size onto its vertex (KiCad's DSUB-15: a pin's 0.05 mm end disc at
 #: 0.1 mm, left with no triangles and reported unmeshed)
 CLOSED_EDGE_SEGMENTS = 3
-#: a face or edge the B-rep's gap g leaves its boundary off its surface (weld.seat_boundaries) is meshed to the target less g, to no
-#: less than this × the target: a gap near the tolerance is reported, not chased into ever smaller triangles
+#: an edge the B-rep's gap g leaves off a tight face's surface (weld.seat_boundaries) is split to the target less g, to
+#: no less than this × the target: a gap near the tolerance is reported, not chased into ever smaller triangles. The
+#: face itself is meshed to the target: its triangles' error holds the gap already (their corners are off the surface),
+#: so a face target less g counted it twice and chased triangles at the boundary chords no insertion could mend (CTC-02's
+#: cones: 3,182 slivers of regularity under 0.005 each in a band 8 µm wide along the chord)
 GAP_FLOOR = 0.25
 #: rounds in which a face whose discretised boundary crosses itself has the crossing segments split (_uncross)
 UNCROSS_ROUNDS = 6
@@ -95,7 +98,7 @@ class FaceStates:
     expected: dict[int, float] = field(default_factory=dict)  # that estimate per face, meshed once (_estimate)
     gaps: BrepGaps = field(default_factory=BrepGaps)  # the B-rep's gaps at the faces' boundaries (weld.seat_boundaries)
     was_over: set[int] = field(default_factory=set)  # faces over the tolerance in some round so far
-    tight: set[int] = field(default_factory=set)  # faces over in two rounds: meshed to less_gap from then on
+    tight: set[int] = field(default_factory=set)  # faces over in two rounds: edges split to less_gap from then on
     plain: set[int] = field(default_factory=set)  # the quality mesher's faces over in three: the default's mesher then
 
     def __post_init__(self) -> None:
@@ -131,7 +134,7 @@ def enforce_tolerance(f: FaceStates, first_error: dict[int, np.ndarray], progres
                 and not _within_on_a_finer_grid(f.patches[i], f.surfaces[i], f.errors[i], f.tol)]
         if not over:
             break
-        if f.params.quality:  # over three times, once to less_gap: the quality mesher cannot, the plain one
+        if f.params.quality:  # over three times, once with edges to less_gap: the quality mesher cannot, the plain one
             _to_plain(f, f.tight.intersection(over))
         # over twice (not only running: a face within once re-meshed can be over again when its neighbours' boundary
         # nodes move, and so on in turn): the B-rep's gap is reckoned with from now
@@ -175,7 +178,6 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
 
     def mesh_one(i: int) -> FacePatch | None:
         old = f.patches[i]
-        face_target = less_gap(target, f.gaps.face.get(i, 0.0)) if i in f.tight else target
         seeds = None
         if old is not None and old.uv is not None and not (i in f.plain and old.meshed_by in ("quality", "lattice")):
             seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]  # not the points the quality mesh met again
@@ -183,10 +185,10 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
             if i in f.lattice and i not in f.plain:
                 face = f.model.faces[i]
                 lattice = mesh_lattice(i, face, boundary_loops(face, f.topo, target, f.params.angular),
-                                       f.surfaces[i], f.lattice[i], face_target, f.params.check_order)  # type: ignore[arg-type]
+                                       f.surfaces[i], f.lattice[i], target, f.params.check_order)  # type: ignore[arg-type]
                 if lattice is not None:
                     return lattice
-            return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], face_target,  # type: ignore[arg-type]
+            return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
                              f.params.angular, f.params.check_order, seeds, f.min_area,
                              quality=f.params.quality and i not in f.plain)
         except AmprepError as exc:
@@ -264,7 +266,7 @@ def _split_crossings(f: FaceStates, i: int) -> tuple[set[int], int]:
 
 
 def less_gap(target: float, gap: float) -> float:
-    """The target a face or edge is meshed to where the B-rep's gap (mm) leaves its boundary off its surface:
+    """The target an edge is split to where the B-rep's gap (mm) leaves it off a face's surface:
     max(target − gap, GAP_FLOOR × target)."""
     return max(target - gap, GAP_FLOOR * target)
 
