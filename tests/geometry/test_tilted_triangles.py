@@ -35,6 +35,19 @@ def _cylinder_face(nurbs: bool):  # type: ignore[no-untyped-def]
     return next(f for f in model_from_shape(shape).faces if surface_of(f).surface_type in ("cylinder", "bspline"))
 
 
+def _measured_and_true(surface, corners: np.ndarray, uv: np.ndarray, radius: float,  # type: ignore[no-untyped-def]
+                       kernels: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the measure on the Surface, the normal distance alone (its evaluate), the closed-form distance |ρ − radius| of
+    the grid points from a cylinder about z), each (m,), numpy or the compiled kernels."""
+    if kernels:
+        chordal.load_kernels()
+    with compiled(kernels):
+        measured = triangle_chordal_error(corners, uv, surface)
+        normal_only = triangle_chordal_error(corners, uv, surface.evaluate)
+    points = np.matmul(barycentric_grid(6), corners)
+    return measured, normal_only, np.abs(np.hypot(points[..., 0], points[..., 1]) - radius).max(axis=1)
+
+
 @pytest.mark.parametrize("nurbs", [False, True])
 @pytest.mark.parametrize("kernels", [False, True])
 def test_a_triangle_standing_in_a_cross_section_is_measured_by_its_distance(nurbs: bool, kernels: bool):
@@ -53,13 +66,7 @@ def test_a_triangle_standing_in_a_cross_section_is_measured_by_its_distance(nurb
     rise = 1e-3 * (v2 - v1)
     uv = np.stack([np.stack([a, v], 1), np.stack([a + span / 2, v + rise], 1), np.stack([a + span, v], 1)], axis=1)
     corners = surface.evaluate(uv.reshape(-1, 2)).reshape(-1, 3, 3)
-    if kernels:
-        chordal.load_kernels()
-    with compiled(kernels):
-        measured = triangle_chordal_error(corners, uv, surface)
-        normal_only = triangle_chordal_error(corners, uv, surface.evaluate)
-    points = np.matmul(barycentric_grid(6), corners)
-    true = np.abs(np.hypot(points[..., 0], points[..., 1]) - 1.0).max(axis=1)
+    measured, normal_only, true = _measured_and_true(surface, corners, uv, 1.0, kernels)
     assert np.all(measured >= true - 1e-9)
     assert np.all(measured <= 1.05 * true), (measured / true).max()
     assert np.all(normal_only < 0.2 * true)
@@ -166,14 +173,7 @@ def test_a_triangle_tilted_between_10_and_60_degrees_is_measured_by_its_distance
     facing = np.abs(unit[:, 0] * np.cos(mid) + unit[:, 1] * np.sin(mid))
     keep = (facing < np.cos(np.radians(10))) & (facing > np.cos(np.radians(60)))
     assert keep.sum() > 100
-    corners, uv = corners[keep], uv[keep]
-    if kernels:
-        chordal.load_kernels()
-    with compiled(kernels):
-        measured = triangle_chordal_error(corners, uv, surface)
-        normal_only = triangle_chordal_error(corners, uv, surface.evaluate)
-    points = np.matmul(barycentric_grid(6), corners)
-    true = np.abs(np.hypot(points[..., 0], points[..., 1]) - 5.0).max(axis=1)
+    measured, normal_only, true = _measured_and_true(surface, corners[keep], uv[keep], 5.0, kernels)
     assert np.all(measured >= np.cos(np.radians(10)) * true - 1e-9), (measured / true).min()
     assert np.any(normal_only < 0.95 * true)
 
