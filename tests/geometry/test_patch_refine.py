@@ -15,7 +15,7 @@ from amprep.geometry.meshing.occt_check import patch_error
 from amprep.geometry.meshing.occt_read import extract_patch
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
-from tests.conftest import corpus
+from tests.conftest import boundary_chord_floor, corpus
 
 
 def _edges(tris):
@@ -55,7 +55,9 @@ def _occt_patches(shape, tol):
 @pytest.mark.parametrize("fraction", [0.9, 0.4])
 def test_refined_patch_is_within_target_and_keeps_boundary_nodes_and_the_rest(reference_solids, name, fraction):
     """OCCT's mesh at 0.1 mm, refined to `fraction` × its own worst error (a few or most triangles over): every
-    triangle is then within the target on an independent measure, the face's boundary edges are the same node pairs
+    triangle is then within the target, or its boundary chords' own distance from the surface where that is more (at
+    0.4 of the worst the chords kept are over it: their tilted neighbours hid that until triangles over 10° off were
+    measured by their distance), on an independent measure, the face's boundary edges are the same node pairs
     (so neighbours still weld), no node moves, a round leaves the triangles away from the bad ones as they were, and the (u,v) area
     is unchanged (no fold, no gap)."""
     for patch, surface, err in _occt_patches(reference_solids[name], 0.1):
@@ -66,7 +68,8 @@ def test_refined_patch_is_within_target_and_keeps_boundary_nodes_and_the_rest(re
         out = refine_patch(patch, err, surface, target)
         assert out is not None
         measured = triangle_chordal_error(out.nodes[out.tris], out.uv[out.tris], surface, 6, affine=surface.affine)
-        assert measured.max() <= target and np.allclose(measured, out.error, rtol=0, atol=1e-12)
+        floor = boundary_chord_floor(patch, surface)  # the kept boundary's own chords: no insertion mends them
+        assert measured.max() <= max(target, 1.001 * floor) and np.allclose(measured, out.error, rtol=0, atol=1e-12)
         k = len(patch.nodes)
         assert np.array_equal(out.nodes[:k], patch.nodes) and np.array_equal(out.uv[:k], patch.uv)
         assert np.array_equal(out.node_edge[:k], patch.node_edge) and (out.node_edge[k:] == -1).all()
