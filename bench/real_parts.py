@@ -91,7 +91,7 @@ def main() -> None:
     parts = write_built_parts(tmp / "built") if args.built else package_parts(args.package, tmp)
     if 0 < args.sample < len(parts):
         parts = [parts[i] for i in np.linspace(0, len(parts) - 1, args.sample).round().astype(int)]
-    only = set(Path(args.parts).read_text().split("\n")) - {""} if args.parts else None
+    only = _listed_parts(args)
     kept = _kept_rows(ROOT / "docs" / f"{args.name}.csv", set(args.rerun.split(",")), only) if args.rerun else {}
     rows = []
     for part in parts:
@@ -106,13 +106,18 @@ def main() -> None:
     write_tables(rows, args, len(parts))
 
 
+def _listed_parts(args: argparse.Namespace) -> set[str] | None:
+    """The part labels of the --parts file (one a line), or None without one."""
+    return set(Path(args.parts).read_text().splitlines()) - {""} if args.parts else None
+
+
 def _rerun_note(args: argparse.Namespace) -> str:
     """What the header says of a --rerun: which cells were run again."""
     if not args.rerun:
         return ""
     if not args.parts:
         return f" (then `--rerun {args.rerun}`: the other tools’ cells kept from the run before)"
-    n = len(set(Path(args.parts).read_text().split("\n")) - {""})
+    n = len(_listed_parts(args) or ())
     return (f" (then `--rerun {args.rerun} --parts`: those tools’ cells of the {n} parts whose output a change altered "
             "run again, every other cell kept from the run before)")
 

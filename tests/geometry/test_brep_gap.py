@@ -117,7 +117,7 @@ def test_a_gap_wider_than_the_tolerance_is_reported_not_hidden(tmp_path):
 
 def test_a_gap_the_tolerance_holds_is_named_as_held(tmp_path):
     """A round 6 µm off its planes at 10 µm: within tolerance, and the note says the faces were meshed finer for it
-    (the quality mesher: the default's corner of the round is the strict xfail above)."""
+    (the quality mesher; the default's round is checked by OCCT's projection above)."""
     path = tmp_path / "gapped.brep"
     BRepTools.Write_s(filleted_box(0.006), str(path))
     result = convert(path, MeshParams(tolerance=0.01, mesher="quality"))

@@ -242,8 +242,7 @@ def _offset_bound(corners: np.ndarray, uv: np.ndarray, w: np.ndarray, pts_uv: np
                   box: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """((m, P) min(|S(q_p) − a_p|, |S(q_p + δ_p) − a_p|), (m·P, 2) the (u,v) of the nearer): each grid point a_p of a
     triangle against two surface points, so an upper bound of its distance from the surface; q_p its (u,v) (pts_uv
-    (m·P, 2), S there xyz
-    (m, P, 3)), δ_p = U (EᵀE)⁻¹ Eᵀ (a_p − S(q_p)) the step that the triangle's own affine map (edges E (m, 2, 3) over
+    (m·P, 2), S there xyz (m, P, 3)), δ_p = U (EᵀE)⁻¹ Eᵀ (a_p − S(q_p)) the step that the triangle's own affine map (edges E (m, 2, 3) over
     (u,v) edges U) takes to a_p: it removes the parametrisation's tangential drift, which is no distance. Taken only
     where E is well conditioned (|E₁ × E₂|² > 1e-12 (|E₁|² + |E₂|²)²) and (EᵀE)⁻¹ Eᵀ (a − S) is within ±1 (a step of
     at most the triangle's own (u,v) edges), then clipped to the face's parameter box (surfaces.parameter_box):
