@@ -47,7 +47,8 @@ def _faces_of(model, mesh):
 @pytest.mark.parametrize("source", ["reference", "nist_ctc02_ap242.stp"])
 def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(reference_solids, source):
     """The fused numba kernels (closed forms; rational B-splines with periodic wrap, CTC-02's face 54) against the
-    numpy evaluate-then-project path, on every face, forced on small calls; and they do run there."""
+    numpy evaluate-then-project path, on every face, forced on small calls; and they do run there. The closed-form
+    kernel's tilt cosine (its tangents exact) is `facing`'s (central differences) to 1e-7."""
     from amprep.geometry.cad.read import model_from_shape, read_cad
     from amprep.geometry.measure import chordal
     from amprep.geometry.meshing.params import MeshParams
@@ -69,8 +70,10 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
             if surf.surface_type in ("plane", "cylinder", "cone", "sphere", "torus", "bspline"):
                 assert fast is not None
                 kinds.add(surf.surface_type)
-                for a, b in zip(fast, slow, strict=True):  # the measure, and the grid points' whole offsets
+                for a, b in zip(fast[:2], slow, strict=True):  # the measure, and the grid points' whole offsets
                     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+                if surf.closed_form is not None:  # the closed-form tangents' cosine against central differences'
+                    np.testing.assert_allclose(fast[2], chordal.facing(corners, uv, surf), rtol=0, atol=1e-7)
     assert kinds >= ({"plane", "cylinder", "cone", "sphere", "torus", "bspline"} if source == "reference"
                      else {"plane", "cylinder", "bspline"})
 
@@ -79,7 +82,7 @@ def test_the_compiled_kernel_gives_the_numpy_answer_on_every_surface_kind(refere
 def test_the_compiled_kernels_turn_tables_keep_large_triangles_exact(kind):
     """The compiled closed-form kernel takes a sample's sin and cos from products of three per triangle
     (_chordal_kernel._turns); on triangles up to 6 rad across in u and v, at orders 4, 6 and 12, and with corners off
-    the surface, it gives the numpy path's direct sin and cos to rounding."""
+    the surface, it gives the numpy path's direct sin and cos to rounding, and `facing`'s tilt cosine to 1e-7."""
     import cadquery as cq
 
     from amprep.geometry.cad.surfaces import surface_of
@@ -98,8 +101,9 @@ def test_the_compiled_kernels_turn_tables_keep_large_triangles_exact(kind):
         with compiled(False):
             slow = chordal._sampled(corners, uv, surf.evaluate, barycentric_grid(order), None)
         assert fast is not None
-        for a, b in zip(fast, slow, strict=True):
+        for a, b in zip(fast[:2], slow, strict=True):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(fast[2], chordal.facing(corners, uv, surf), rtol=0, atol=1e-7)
 
 
 @pytest.mark.parametrize("name, tol", [("nist_ctc02_ap242.stp", 0.1), ("nist_ctc02_bspline_ap203.stp", 0.05)])

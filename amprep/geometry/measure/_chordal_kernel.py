@@ -87,9 +87,42 @@ def _revolved(kind, prm, u, v, cu, su, cv, sv, sin_b, cos_b):
     return x, y, z
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _facing(kind, prm, uv, m, nx, ny, nz, sin_b, cos_b):
+    """|n̂ · S_u × S_v| / |S_u × S_v| at triangle m's (u,v) centroid, the tangents in closed form (surfaces.py's
+    formulas differentiated: e' = −sin u·X + cos u·Y times the ring's radius, and S_v); 0 where |S_u × S_v| ≤
+    1e-9 |S_u||S_v| (a pole, an apex), as surfaces.surface_normals gives it."""
+    u = (uv[m, 0, 0] + uv[m, 1, 0] + uv[m, 2, 0]) / 3.0
+    v = (uv[m, 0, 1] + uv[m, 1, 1] + uv[m, 2, 1]) / 3.0
+    if kind == PLANE:
+        a0, a1, a2, b0, b1, b2 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0
+    else:
+        cu, su = np.cos(u), np.sin(u)
+        if kind == CYLINDER:
+            ring, b0, b1, b2 = prm[12], 0.0, 0.0, 1.0
+        elif kind == CONE:
+            ring, b0, b1, b2 = prm[12] + v * sin_b, sin_b * cu, sin_b * su, cos_b
+        else:
+            cv, sv = np.cos(v), np.sin(v)
+            r = prm[12] if kind == SPHERE else prm[13]
+            ring = r * cv if kind == SPHERE else prm[12] + prm[13] * cv
+            b0, b1, b2 = -r * sv * cu, -r * sv * su, r * cv
+        a0, a1, a2 = -ring * su, ring * cu, 0.0
+    tu = (a0 * prm[3] + a1 * prm[6] + a2 * prm[9], a0 * prm[4] + a1 * prm[7] + a2 * prm[10],
+          a0 * prm[5] + a1 * prm[8] + a2 * prm[11])
+    tv = (b0 * prm[3] + b1 * prm[6] + b2 * prm[9], b0 * prm[4] + b1 * prm[7] + b2 * prm[10],
+          b0 * prm[5] + b1 * prm[8] + b2 * prm[11])
+    gx, gy, gz = tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2], tu[0] * tv[1] - tu[1] * tv[0]
+    size = np.sqrt(gx * gx + gy * gy + gz * gz)
+    scale = np.sqrt(tu[0] * tu[0] + tu[1] * tu[1] + tu[2] * tu[2]) * np.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
+    if not size > 1e-9 * scale:
+        return 0.0
+    return abs(gx * nx + gy * ny + gz * nz) / size
+
+
 @njit(cache=True, nogil=True)
-def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, start, end):
-    """out[start:end] and off[start:end] of analytic_chordal_kernel; a revolved surface's sin and cos from _turns'
+def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, start, end):
+    """out, off and facing [start:end] of analytic_chordal_kernel; a revolved surface's sin and cos from _turns'
     tables."""
     cu, su, cv, sv = np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1))
     turn_u = kind != PLANE
@@ -100,7 +133,9 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, start, end
         c = corners[m]
         nx, ny, nz, ok = _unit_normal(c)
         best = whole = 0.0
+        facing[m] = 1.0
         if ok:
+            facing[m] = _facing(kind, prm, uv, m, nx, ny, nz, sin_b, cos_b)
             if turn_u:
                 _turns(au, m, k, cu, su)
             if turn_v:
@@ -118,20 +153,22 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, start, end
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def analytic_chordal_kernel(kind, prm, corners, uv, w, ij, k, stop, out, off):
+def analytic_chordal_kernel(kind, prm, corners, uv, w, ij, k, stop, out, off, facing):
     """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m| and off[m] = max_p |S(…) − Σ_k w[p,k] corners[m,k]|
     (0 for a zero-area triangle); corners (M,3,3), uv (M,3,2), w (P,3) the order-k grid, ij (P, 2) its points'
     (i, j) = k·w[:, :2]; a triangle's points stop at the first over `stop` (out[m] is then a value > stop, not the
-    maximum, and off[m] the maximum so far)."""
+    maximum, and off[m] the maximum so far); facing[m] = |n̂_m · n̂_S| at the triangle's (u,v) centroid (_facing; 1 for
+    a zero-area triangle)."""
     n = corners.shape[0]
     for blk in prange((n + BLOCK - 1) // BLOCK):
-        _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, blk * BLOCK, min(n, (blk + 1) * BLOCK))
+        _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, blk * BLOCK,
+                        min(n, (blk + 1) * BLOCK))
 
 
 @njit(cache=True, nogil=True)
-def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, out, off):
+def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, out, off, facing):
     """analytic_chordal_kernel on the calling thread only."""
-    _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, 0, corners.shape[0])
+    _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, 0, corners.shape[0])
 
 
 @njit(cache=True, nogil=True)

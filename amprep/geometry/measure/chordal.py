@@ -142,8 +142,9 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
 
 
 def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray,
-              stop: float = np.inf) -> tuple[np.ndarray, np.ndarray] | None:
-    """(ε_T, the largest |S(q_p) − a_p|) (m,) each by the fused, threaded kernel of _chordal_kernel.py, or None where
+              stop: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
+    """(ε_T, the largest |S(q_p) − a_p|, and for a closed-form surface `facing`'s value, else None) (m,) each by the
+    fused, threaded kernel of _chordal_kernel.py, or None where
     the surface has none (OCCT-evaluated kinds) or core.compiled.use_compiled says numpy (the computation's choice,
     else a call too small to pay numba's start-up), whether or not the kernels are loaded."""
     kind = surface.closed_form
@@ -156,26 +157,29 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
         load_kernels()
     assert _kernels is not None
     out, off = np.empty(len(corners)), np.empty(len(corners))
+    cos = np.empty(len(corners)) if kind is not None else None
     corners = np.ascontiguousarray(corners, dtype=np.float64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     for s in range(0, len(corners), CALL_TRIANGLES):  # bounded calls: a cancel or time limit seen between them
         if s:
             checkpoint()
         sl = slice(s, s + CALL_TRIANGLES)
-        _kernel_call(kind, d, corners[sl], uv[sl], w, stop, out[sl], off[sl])
-    return out, off
+        _kernel_call(kind, d, corners[sl], uv[sl], w, stop, out[sl], off[sl], None if cos is None else cos[sl])
+    return out, off, cos
 
 
 def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: np.ndarray,  # type: ignore[type-arg]
-                 uv: np.ndarray, w: np.ndarray, stop: float, out: np.ndarray, off: np.ndarray) -> None:
-    """One call of the analytic (`kind`) or B-spline (`d`) chordal kernel, writing `out` and `off` (m,)."""
+                 uv: np.ndarray, w: np.ndarray, stop: float, out: np.ndarray, off: np.ndarray,
+                 cos: np.ndarray | None) -> None:
+    """One call of the analytic (`kind`) or B-spline (`d`) chordal kernel, writing `out` and `off` (m,), and the
+    analytic one `cos` (m,) too."""
     assert _kernels is not None
     serial = len(corners) <= _kernels.BLOCK
     if kind is not None:
         fn = _kernels.analytic_chordal_serial if serial else _kernels.analytic_chordal_kernel
         k = _grid_order(len(w))
         ij = np.ascontiguousarray(np.rint(w[:, :2] * k), dtype=np.int64)
-        fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), out, off)
+        fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), out, off, cos)
         return
     assert d is not None
     if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
@@ -202,19 +206,27 @@ TILT_SCREEN = 1.0 / TILT_MAX
 TILT_STEPS, TILT_SETTLE = 8, 1e-9
 
 
+def facing(corners: np.ndarray, uv: np.ndarray, surface: Surface) -> np.ndarray:
+    """(m,) |n̂_T · n̂_S| of triangles (corners (m, 3, 3), uv (m, 3, 2)): the cosine between each one's normal and the
+    surface's at its (u,v) centroid (surface_normals: 0 at a pole or apex); 1 for a zero-area triangle."""
+    unit, area = unit_normals(corners)
+    cos = np.abs((surface_normals(surface, uv.mean(axis=1)) * unit).sum(axis=1))
+    return np.where(area > 0, cos, 1.0)
+
+
 def tilted_bound(corners: np.ndarray, uv: np.ndarray, surface: Surface, w: np.ndarray, err: np.ndarray,
-                 off: np.ndarray) -> np.ndarray:
+                 off: np.ndarray, cos: np.ndarray | None = None) -> np.ndarray:
     """(m,) err raised, for the triangles tilted on the surface (normal over 10° off the surface's at their (u,v)
     centroid; screened by off (m,), the largest |S(q_p) − a_p| of their grid points, over TILT_SCREEN × err), to the
     largest of their grid points' distances from a surface point: the least of |S(q_p) − a_p|, _offset_bound's step
     and TILT_STEPS of Gauss–Newton from q_p, each an upper bound. err, the distance along a triangle's normal, sees
     its points' offset to the cosine of its tilt, and not at all where the triangle holds S(u,v) in its own plane
-    (three points of one cross-section of a fillet, a needle beside a boundary chord off its face)."""
+    (three points of one cross-section of a fillet, a needle beside a boundary chord off its face). cos (m,):
+    `facing`'s values where the compiled kernel gave them, else computed for the screened triangles."""
     suspect = np.flatnonzero(off > TILT_SCREEN * err)
     if len(suspect):
-        unit = unit_normals(corners[suspect])[0]
-        facing = np.abs((surface_normals(surface, uv[suspect].mean(axis=1)) * unit).sum(axis=1))
-        suspect = suspect[(facing < TILT_MAX) & (norms(unit) > 0)]
+        cos = facing(corners[suspect], uv[suspect], surface) if cos is None else cos[suspect]
+        suspect = suspect[cos < TILT_MAX]
     if not len(suspect):
         return err
     out = err.copy()
