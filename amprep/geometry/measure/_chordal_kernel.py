@@ -112,6 +112,12 @@ def _facing(kind, prm, uv, m, nx, ny, nz, sin_b, cos_b):
           a0 * prm[5] + a1 * prm[8] + a2 * prm[11])
     tv = (b0 * prm[3] + b1 * prm[6] + b2 * prm[9], b0 * prm[4] + b1 * prm[7] + b2 * prm[10],
           b0 * prm[5] + b1 * prm[8] + b2 * prm[11])
+    return _tilt_cos(nx, ny, nz, tu, tv)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _tilt_cos(nx, ny, nz, tu, tv):
+    """|n̂ · (tu × tv)| / |tu × tv|, 0 where |tu × tv| ≤ 1e-9 |tu||tv| (surfaces.surface_normals' zero normal)."""
     gx, gy, gz = tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2], tu[0] * tv[1] - tu[1] * tv[0]
     size = np.sqrt(gx * gx + gy * gy + gz * gz)
     scale = np.sqrt(tu[0] * tu[0] + tu[1] * tu[1] + tu[2] * tu[2]) * np.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
@@ -121,7 +127,7 @@ def _facing(kind, prm, uv, m, nx, ny, nz, sin_b, cos_b):
 
 
 @njit(cache=True, nogil=True)
-def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, start, end):
+def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, screen, out, off, facing, start, end):
     """out, off and facing [start:end] of analytic_chordal_kernel; a revolved surface's sin and cos from _turns'
     tables."""
     cu, su, cv, sv = np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1)), np.empty((k + 1, k + 1))
@@ -133,9 +139,7 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, st
         c = corners[m]
         nx, ny, nz, ok = _unit_normal(c)
         best = whole = 0.0
-        facing[m] = 1.0
         if ok:
-            facing[m] = _facing(kind, prm, uv, m, nx, ny, nz, sin_b, cos_b)
             if turn_u:
                 _turns(au, m, k, cu, su)
             if turn_v:
@@ -150,29 +154,36 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, st
                     break
         out[m] = best
         off[m] = np.sqrt(whole)
+        facing[m] = _facing(kind, prm, uv, m, nx, ny, nz, sin_b, cos_b) if ok and off[m] > screen * best else 1.0
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def analytic_chordal_kernel(kind, prm, corners, uv, w, ij, k, stop, out, off, facing):
+def analytic_chordal_kernel(kind, prm, corners, uv, w, ij, k, stop, screen, out, off, facing):
     """out[m] = max_p |(S(Σ_k w[p,k] uv[m,k]) − corners[m,0]) · n̂_m| and off[m] = max_p |S(…) − Σ_k w[p,k] corners[m,k]|
     (0 for a zero-area triangle); corners (M,3,3), uv (M,3,2), w (P,3) the order-k grid, ij (P, 2) its points'
     (i, j) = k·w[:, :2]; a triangle's points stop at the first over `stop` (out[m] is then a value > stop, not the
-    maximum, and off[m] the maximum so far); facing[m] = |n̂_m · n̂_S| at the triangle's (u,v) centroid (_facing; 1 for
-    a zero-area triangle)."""
+    maximum, and off[m] the maximum so far); facing[m] = |n̂_m · n̂_S| at the triangle's (u,v) centroid (_facing)
+    where off[m] > screen · out[m] (chordal.tilted_bound's screen), else 1 (and for a zero-area triangle)."""
     n = corners.shape[0]
     for blk in prange((n + BLOCK - 1) // BLOCK):
-        _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, blk * BLOCK,
+        _analytic_range(kind, prm, corners, uv, w, ij, k, stop, screen, out, off, facing, blk * BLOCK,
                         min(n, (blk + 1) * BLOCK))
 
 
 @njit(cache=True, nogil=True)
-def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, out, off, facing):
+def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, screen, out, off, facing):
     """analytic_chordal_kernel on the calling thread only."""
-    _analytic_range(kind, prm, corners, uv, w, ij, k, stop, out, off, facing, 0, corners.shape[0])
+    _analytic_range(kind, prm, corners, uv, w, ij, k, stop, screen, out, off, facing, 0, corners.shape[0])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _wrapped(t, per):
+    """t moved into the period [per[0], per[1]) (per[1] ≤ per[0]: not periodic, t as it is)."""
+    return per[0] + (t - per[0]) % (per[1] - per[0]) if per[1] > per[0] else t
 
 
 @njit(cache=True, nogil=True)
-def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off, start, end):
+def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, screen, h, out, off, facing, start, end):
     work = scratch(udeg, vdeg)
     su = sv = -1
     for m in range(start, end):
@@ -182,31 +193,45 @@ def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out
         if ok:
             for p in range(w.shape[0]):
                 u, v = _sample(w, uv, m, p)
-                if uper[1] > uper[0]:
-                    u = uper[0] + (u - uper[0]) % (uper[1] - uper[0])
-                if vper[1] > vper[0]:
-                    v = vper[0] + (v - vper[0]) % (vper[1] - vper[0])
-                x, y, z, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, u, v, work, su, sv)
+                x, y, z, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u, uper), _wrapped(v, vper), work,
+                                               su, sv)
                 best = max(best, _distance(c, nx, ny, nz, (x, y, z)))
                 whole = max(whole, _offset2(c, w, p, (x, y, z)))
                 if best > stop:
                     break
         out[m] = best
         off[m] = np.sqrt(whole)
+        facing[m] = 1.0
+        if ok and off[m] > screen * best:  # S_u, S_v by central differences of h at the (u,v) centroid, as numpy's
+            u = (uv[m, 0, 0] + uv[m, 1, 0] + uv[m, 2, 0]) / 3.0
+            v = (uv[m, 0, 1] + uv[m, 1, 1] + uv[m, 2, 1]) / 3.0
+            ax, ay, az, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u + h[0], uper), _wrapped(v, vper),
+                                              work, su, sv)
+            bx, by, bz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u - h[0], uper), _wrapped(v, vper),
+                                              work, su, sv)
+            cx, cy, cz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u, uper), _wrapped(v + h[1], vper),
+                                              work, su, sv)
+            dx, dy, dz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u, uper), _wrapped(v - h[1], vper),
+                                              work, su, sv)
+            tu = ((ax - bx) / (2 * h[0]), (ay - by) / (2 * h[0]), (az - bz) / (2 * h[0]))
+            tv = ((cx - dx) / (2 * h[1]), (cy - dy) / (2 * h[1]), (cz - dz) / (2 * h[1]))
+            facing[m] = _tilt_cos(nx, ny, nz, tu, tv)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def bspline_chordal_kernel(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off):
+def bspline_chordal_kernel(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, screen, h, out, off, facing):
     """The same for a rational B-spline (poles·weights | weights (nu, nv, 4); ub, vb: each direction's knots and the
     Bernstein forms of its basis, _bspline_kernel.point_kernel's); a periodic direction's parameter is wrapped into
-    [uper[0], uper[1]) (uper[1] ≤ uper[0]: not periodic)."""
+    [uper[0], uper[1]) (uper[1] ≤ uper[0]: not periodic); the tangents of facing by central differences of h (2,)
+    (surfaces.tangents' steps)."""
     n = corners.shape[0]
     for blk in prange((n + BLOCK - 1) // BLOCK):
-        _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off, blk * BLOCK,
-                       min(n, (blk + 1) * BLOCK))
+        _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, screen, h, out, off, facing,
+                       blk * BLOCK, min(n, (blk + 1) * BLOCK))
 
 
 @njit(cache=True, nogil=True)
-def bspline_chordal_serial(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off):
+def bspline_chordal_serial(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, screen, h, out, off, facing):
     """bspline_chordal_kernel on the calling thread only."""
-    _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, out, off, 0, corners.shape[0])
+    _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, screen, h, out, off, facing, 0,
+                   corners.shape[0])

@@ -8,7 +8,7 @@ from functools import lru_cache
 import numpy as np
 
 from amprep.geometry.cad import bspline as _bspline
-from amprep.geometry.cad.surfaces import Surface, parameter_box, project_points, surface_normals
+from amprep.geometry.cad.surfaces import Surface, parameter_box, project_points, surface_normals, uv_extent
 from amprep.geometry.core.compiled import compiled, use_compiled
 from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import norms, unit_normals
@@ -142,9 +142,9 @@ def affine_chordal_bound(corners: np.ndarray, uv: np.ndarray, evaluate: Callable
 
 
 def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarray,
-              stop: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
-    """(ε_T, the largest |S(q_p) − a_p|, and for a closed-form surface `facing`'s value, else None) (m,) each by the
-    fused, threaded kernel of _chordal_kernel.py, or None where
+              stop: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(ε_T, the largest |S(q_p) − a_p|, `facing`'s cosine where the second is over TILT_SCREEN × the first, else 1)
+    (m,) each by the fused, threaded kernel of _chordal_kernel.py, or None where
     the surface has none (OCCT-evaluated kinds) or core.compiled.use_compiled says numpy (the computation's choice,
     else a call too small to pay numba's start-up), whether or not the kernels are loaded."""
     kind = surface.closed_form
@@ -157,29 +157,30 @@ def _compiled(surface: Surface, corners: np.ndarray, uv: np.ndarray, w: np.ndarr
         load_kernels()
     assert _kernels is not None
     out, off = np.empty(len(corners)), np.empty(len(corners))
-    cos = np.empty(len(corners)) if kind is not None else None
+    cos = np.empty(len(corners))
+    h = 1e-6 * uv_extent(surface)  # surfaces.tangents' steps
     corners = np.ascontiguousarray(corners, dtype=np.float64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     for s in range(0, len(corners), CALL_TRIANGLES):  # bounded calls: a cancel or time limit seen between them
         if s:
             checkpoint()
         sl = slice(s, s + CALL_TRIANGLES)
-        _kernel_call(kind, d, corners[sl], uv[sl], w, stop, out[sl], off[sl], None if cos is None else cos[sl])
+        _kernel_call(kind, d, corners[sl], uv[sl], w, stop, h, out[sl], off[sl], cos[sl])
     return out, off, cos
 
 
 def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: np.ndarray,  # type: ignore[type-arg]
-                 uv: np.ndarray, w: np.ndarray, stop: float, out: np.ndarray, off: np.ndarray,
-                 cos: np.ndarray | None) -> None:
-    """One call of the analytic (`kind`) or B-spline (`d`) chordal kernel, writing `out` and `off` (m,), and the
-    analytic one `cos` (m,) too."""
+                 uv: np.ndarray, w: np.ndarray, stop: float, h: np.ndarray, out: np.ndarray, off: np.ndarray,
+                 cos: np.ndarray) -> None:
+    """One call of the analytic (`kind`) or B-spline (`d`) chordal kernel, writing `out`, `off` and `cos` (m,); h (2,)
+    the B-spline's difference steps in u and v."""
     assert _kernels is not None
     serial = len(corners) <= _kernels.BLOCK
     if kind is not None:
         fn = _kernels.analytic_chordal_serial if serial else _kernels.analytic_chordal_kernel
         k = _grid_order(len(w))
         ij = np.ascontiguousarray(np.rint(w[:, :2] * k), dtype=np.int64)
-        fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), out, off, cos)
+        fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), TILT_SCREEN, out, off, cos)
         return
     assert d is not None
     if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
@@ -189,7 +190,7 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
     ub, vb = _bspline.kernel_bases(d, d["uknots"], int(d["udeg"]), d["vknots"], int(d["vdeg"]), d["_pw"].shape[:2])
     fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
     fn(d["_pw"], ub, vb, int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w),
-       float(stop), out, off)
+       float(stop), TILT_SCREEN, np.ascontiguousarray(h, dtype=np.float64), out, off, cos)
 
 
 #: a triangle whose normal is over 10° off the surface's (|cos| under TILT_MAX) is also measured by its points' distance
