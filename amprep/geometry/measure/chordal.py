@@ -196,9 +196,9 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
 #: a triangle whose normal is over 10° off the surface's (|cos| under TILT_MAX) is also measured by its points' distance
 #: from it; screened by its grid points lying over TILT_SCREEN = 1 / TILT_MAX × its measured error from S at their
 #: (u,v), which every such triangle whose deviation lies along the surface's normal does. A triangle not screened is
-#: measured to at least cos 10° of its points' distance (|S(q) − a| bounds it); at 60° (until 2026-11) the measure saw
-#: intermediate meshes' triangles 12–19° off at a twentieth to a third of their true distance (OCCT's top, default
-#: mesher, by OCCT's own distance)
+#: measured to at least cos 10° of its points' distance (|S(q) − a| bounds it); a 60° bound let intermediate meshes'
+#: triangles 12–19° off be measured at a twentieth to a third of their true distance (OCCT's top, default mesher, by
+#: OCCT's own distance). The compiled kernels give the tilt's cosine of the screened triangles (`facing`'s)
 TILT_MAX = float(np.cos(np.radians(10.0)))
 TILT_SCREEN = 1.0 / TILT_MAX
 #: Gauss–Newton steps toward a grid point's foot on the surface in tilted_bound, each point stopping once its step is

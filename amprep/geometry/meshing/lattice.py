@@ -434,7 +434,8 @@ def _lattice_nodes(loop: dict, sides: Sides, rows: np.ndarray, surface: Surface,
     k = np.arange(nrow)
     for end, side, dist in ((0, sides.bottom, k), (1, sides.top, nrow - 1 - k)):
         if sides.pole[end] < 0:  # a row near a finely cut boundary row is graded towards it
-            n = np.maximum(n, np.ceil((len(side) - 1) / GROW ** dist.astype(float)).astype(np.int64))
+            far = np.minimum(dist, 1000).astype(float)  # 1.6^1000 ~ 1e204: every side's count is under one there
+            n = np.maximum(n, np.ceil((len(side) - 1) / GROW ** far).astype(np.int64))
     r_row, r_u = _row_nodes(field, sides, rows[1:-1], n[1:-1])
     r_row += 1
     # each row's node ids in u order: left end, interior, right end (the loop's side nodes)
