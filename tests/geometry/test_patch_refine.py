@@ -1,5 +1,7 @@
 """Local refinement of a meshed face: only the neighbourhood of the triangles over tolerance is re-triangulated."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -296,3 +298,65 @@ def test_the_flips_side_table_updated_in_place_equals_one_built_afresh():
         packed = _repacked(packed, tris, changed, 400)
         assert np.array_equal(packed, _packed_sides(tris, 400))
         assert all(np.array_equal(a, b) for a, b in zip(_pairs(packed, 3 * len(tris)), _shared_sides(tris, 400)))
+
+
+def _sphere_patch(tol: float):  # type: ignore[no-untyped-def]
+    """OCCT's mesh of a sphere r 10 about the origin at tol: its face's (patch, surface, error)."""
+    import cadquery as cq
+
+    for patch, surface, err in _occt_patches(cq.Solid.makeSphere(10.0).wrapped, tol):
+        if surface.surface_type == "sphere":
+            return patch, surface, err
+    raise AssertionError("no sphere face")
+
+
+def test_triangles_over_by_their_boundary_nodes_alone_are_left_as_they_are():
+    """A sphere whose boundary nodes (seam, poles) stand 3× the tolerance off it, radially (a B-rep gap): no point
+    inserted inside lowers the triangles standing on them, since the measure counts their corners. They are left as
+    they are, with no round of insertions (refined regardless, each node's fan grew round after round). Checked by
+    closed-form distance from the sphere: the triangles off the moved nodes are within, and were left."""
+    from amprep.geometry.meshing import local_refine
+
+    tol = 0.1
+    patch, surface, _ = _sphere_patch(tol)
+    boundary = (patch.node_edge >= 0) | (patch.node_vertex >= 0)
+    nodes = patch.nodes.copy()
+    nodes[boundary] += 3 * tol * nodes[boundary] / 10.0
+    moved = replace(patch, nodes=nodes)
+    err = triangle_chordal_error(nodes[patch.tris], patch.uv[patch.tris], surface, 6)
+    touching = boundary[patch.tris].any(axis=1)
+    assert (err > tol).any() and (err[~touching] <= tol).all()
+    rounds = []
+    real = local_refine._retriangulate
+
+    def counted(*args):  # type: ignore[no-untyped-def]
+        rounds.append(1)
+        return real(*args)
+
+    local_refine._retriangulate = counted
+    try:
+        out = refine_patch(moved, err, surface, tol)
+    finally:
+        local_refine._retriangulate = real
+    assert out is not None and not rounds and np.array_equal(out.tris, patch.tris)
+    w = np.array([[a / 6, b / 6, (6 - a - b) / 6] for a in range(7) for b in range(7 - a)])
+    distance = np.abs(np.linalg.norm(np.einsum("pk,mkd->mpd", w, nodes[patch.tris]), axis=-1) - 10.0).max(axis=1)
+    assert (distance[~touching] <= tol).all() and np.allclose(out.error, err, rtol=1e-9, atol=0)
+
+
+def test_refinement_that_makes_no_progress_stops(monkeypatch):
+    """Insertions whose triangles stay over the tolerance (forced: every new triangle measured over it) stop after
+    STALL_ROUNDS rounds with no fewer triangles over than before, not after MAX_ROUNDS."""
+    from amprep.geometry.meshing import local_refine
+    from amprep.geometry.meshing.uv_cdt import MAX_ROUNDS
+
+    tol = 0.1
+    patch, surface, err = _sphere_patch(tol)
+    err = np.where(np.arange(len(err)) % 7 == 0, 2 * tol, err)
+    monkeypatch.setattr(local_refine, "triangle_chordal_error",
+                        lambda corners, *a, **k: np.full(len(corners), 2 * tol))
+    rounds = []
+    real = local_refine._retriangulate
+    monkeypatch.setattr(local_refine, "_retriangulate", lambda *a: rounds.append(1) or real(*a))
+    out = refine_patch(patch, err, surface, tol)
+    assert out is not None and len(rounds) == local_refine.STALL_ROUNDS < MAX_ROUNDS

@@ -66,6 +66,12 @@ def _retriangulate(pts: np.ndarray, region: np.ndarray, outside_seeds: np.ndarra
     return nodes, tris
 
 
+#: refine_patch stops once this many rounds running leave no fewer triangles over the tolerance than the fewest
+#: before: its insertions no longer converge (a (u,v) scale that does not fit the face, CTC-02's face 361 at
+#: 0.001 mm: 1,019 → 1,377 → … → 2,188 over in 26 rounds, 102,676 triangles grown to 238,238)
+STALL_ROUNDS = 8
+
+
 def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, tolerance: float, order: int = 6,
                  rounds: int = MAX_ROUNDS, scale: np.ndarray | None = None) -> FacePatch | None:
     """The patch with every triangle whose chordal error `error` (t,) exceeds the tolerance replaced, with the
@@ -74,9 +80,10 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     (`error` of the result is set). None when a region cannot be re-triangulated (a fold in the face's (u,v)).
     Regions are re-triangulated in (u,v) · `scale` (2,), the space the patch was triangulated in (default:
     metric_scale's, where OCCT's meshes are near-Delaunay); elsewhere a region's re-triangulation flips its
-    neighbours' diagonals and the bad triangles move instead of going."""
+    neighbours' diagonals and the bad triangles move instead of going. Triangles with a corner over the tolerance
+    off the surface (corner_bound) are left as they are; it stops early once STALL_ROUNDS rounds make no progress."""
     assert patch.uv is not None
-    tris, err = patch.tris, np.asarray(error, float)
+    tris, err = patch.tris, np.array(error, float)
     length_scale = metric_scale(surface, patch.uv)
     scale = length_scale if scale is None else np.asarray(scale, float)
     spacing = min_spacing(tolerance, scale, length_scale)
@@ -85,10 +92,15 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     sign = 1.0 if _signed_area2(pts, tris).sum() >= 0 else -1.0
     codes, count = np.unique(edge_codes(tris, len(pts) + 1), return_counts=True)
     boundary_pairs = np.stack(np.divmod(codes[count == 1], len(pts) + 1), axis=1)  # the face's boundary: kept
+    fewest, stalled = len(tris) + 1, 0
     for _ in range(rounds):
         checkpoint()
         bad = err > tolerance
-        if not bad.any():
+        bad[corner_bound(xyz, uv, tris, bad, surface, tolerance)] = False  # no point inside brings them within
+        n_bad = int(bad.sum())
+        stalled = 0 if n_bad < fewest else stalled + 1
+        fewest = min(fewest, n_bad)
+        if not n_bad or stalled >= STALL_ROUNDS:
             break
         base = len(pts) + 1
         boundary = boundary_pairs[:, 0] * base + boundary_pairs[:, 1]
@@ -135,6 +147,24 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
                    node_edge=np.concatenate([patch.node_edge, np.full(k, -1, np.int64)]),
                    node_param=np.concatenate([patch.node_param, np.full(k, np.nan)]),
                    meshed_by="refined" if patch.meshed_by == "occt" else patch.meshed_by, error=err)
+
+
+def corner_bound(nodes: np.ndarray, uv: np.ndarray, tris: np.ndarray, over: np.ndarray, surface: Surface,
+                 tolerance: float) -> np.ndarray:
+    """(k,) ids of the triangles `over` (t,) bool of tris (t, 3) on nodes (n, 3) with (u,v) (n, 2) that have a corner
+    c_i off the surface along their normal, |(S(u_i, v_i) − c_i) · n̂|, by more than the tolerance (a boundary node
+    off its face by a B-rep gap over it): the chordal measure counts the corners, so no point inserted inside brings
+    them within it. Refined regardless, each such node's fan grew round after round (CTC-02 at 0.001 mm: one face's
+    2,222 triangles over became 20,311 of 590,628 after 40 rounds)."""
+    idx = np.flatnonzero(over)
+    if not len(idx):
+        return idx
+    corners, at = nodes[tris[idx]], uv[tris[idx]]
+    unit = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    size = norms(unit)
+    unit = unit / np.where(size > 0, size, 1.0)[:, None]
+    off = np.abs(dot(surface.evaluate(at.reshape(-1, 2)).reshape(-1, 3, 3) - corners, unit[:, None, :])).max(axis=1)
+    return idx[off > tolerance]
 
 
 #: a triangle is a needle when its area ≤ this × (longest edge)²
