@@ -342,21 +342,3 @@ def test_triangles_over_by_their_boundary_nodes_alone_are_left_as_they_are():
     w = np.array([[a / 6, b / 6, (6 - a - b) / 6] for a in range(7) for b in range(7 - a)])
     distance = np.abs(np.linalg.norm(np.einsum("pk,mkd->mpd", w, nodes[patch.tris]), axis=-1) - 10.0).max(axis=1)
     assert (distance[~touching] <= tol).all() and np.allclose(out.error, err, rtol=1e-9, atol=0)
-
-
-def test_refinement_that_makes_no_progress_stops(monkeypatch):
-    """Insertions whose triangles stay over the tolerance (forced: every new triangle measured over it) stop after
-    STALL_ROUNDS rounds with no fewer triangles over than before, not after MAX_ROUNDS."""
-    from amprep.geometry.meshing import local_refine
-    from amprep.geometry.meshing.uv_cdt import MAX_ROUNDS
-
-    tol = 0.1
-    patch, surface, err = _sphere_patch(tol)
-    err = np.where(np.arange(len(err)) % 7 == 0, 2 * tol, err)
-    monkeypatch.setattr(local_refine, "triangle_chordal_error",
-                        lambda corners, *a, **k: np.full(len(corners), 2 * tol))
-    rounds = []
-    real = local_refine._retriangulate
-    monkeypatch.setattr(local_refine, "_retriangulate", lambda *a: rounds.append(1) or real(*a))
-    out = refine_patch(patch, err, surface, tol)
-    assert out is not None and len(rounds) == local_refine.STALL_ROUNDS < MAX_ROUNDS

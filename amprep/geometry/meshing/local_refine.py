@@ -66,12 +66,6 @@ def _retriangulate(pts: np.ndarray, region: np.ndarray, outside_seeds: np.ndarra
     return nodes, tris
 
 
-#: refine_patch stops once this many rounds running leave no fewer triangles over the tolerance than the fewest
-#: before: its insertions no longer converge (a (u,v) scale that does not fit the face, CTC-02's face 361 at
-#: 0.001 mm: 1,019 → 1,377 → … → 2,188 over in 26 rounds, 102,676 triangles grown to 238,238)
-STALL_ROUNDS = 8
-
-
 def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, tolerance: float, order: int = 6,
                  rounds: int = MAX_ROUNDS, scale: np.ndarray | None = None) -> FacePatch | None:
     """The patch with every triangle whose chordal error `error` (t,) exceeds the tolerance replaced, with the
@@ -81,7 +75,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     Regions are re-triangulated in (u,v) · `scale` (2,), the space the patch was triangulated in (default:
     metric_scale's, where OCCT's meshes are near-Delaunay); elsewhere a region's re-triangulation flips its
     neighbours' diagonals and the bad triangles move instead of going. Triangles with a corner over the tolerance
-    off the surface (corner_bound) are left as they are; it stops early once STALL_ROUNDS rounds make no progress."""
+    off the surface (corner_bound) are left as they are."""
     assert patch.uv is not None
     tris, err = patch.tris, np.array(error, float)
     length_scale = metric_scale(surface, patch.uv)
@@ -92,15 +86,11 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     sign = 1.0 if _signed_area2(pts, tris).sum() >= 0 else -1.0
     codes, count = np.unique(edge_codes(tris, len(pts) + 1), return_counts=True)
     boundary_pairs = np.stack(np.divmod(codes[count == 1], len(pts) + 1), axis=1)  # the face's boundary: kept
-    fewest, stalled = len(tris) + 1, 0
     for _ in range(rounds):
         checkpoint()
         bad = err > tolerance
         bad[corner_bound(xyz, uv, tris, bad, surface, tolerance)] = False  # no point inside brings them within
-        n_bad = int(bad.sum())
-        stalled = 0 if n_bad < fewest else stalled + 1
-        fewest = min(fewest, n_bad)
-        if not n_bad or stalled >= STALL_ROUNDS:
+        if not bad.any():
             break
         base = len(pts) + 1
         boundary = boundary_pairs[:, 0] * base + boundary_pairs[:, 1]
