@@ -310,7 +310,7 @@ def _sphere_patch(tol: float):  # type: ignore[no-untyped-def]
     raise AssertionError("no sphere face")
 
 
-def test_triangles_over_by_their_boundary_nodes_alone_are_left_as_they_are():
+def test_triangles_over_by_their_boundary_nodes_alone_are_left_as_they_are(monkeypatch):
     """A sphere whose boundary nodes (seam, poles) stand 3× the tolerance off it, radially (a B-rep gap): no point
     inserted inside lowers the triangles standing on them, since the measure counts their corners. They are left as
     they are, with no round of insertions (refined regardless, each node's fan grew round after round). Checked by
@@ -328,16 +328,8 @@ def test_triangles_over_by_their_boundary_nodes_alone_are_left_as_they_are():
     assert (err > tol).any() and (err[~touching] <= tol).all()
     rounds = []
     real = local_refine._retriangulate
-
-    def counted(*args):  # type: ignore[no-untyped-def]
-        rounds.append(1)
-        return real(*args)
-
-    local_refine._retriangulate = counted
-    try:
-        out = refine_patch(moved, err, surface, tol)
-    finally:
-        local_refine._retriangulate = real
+    monkeypatch.setattr(local_refine, "_retriangulate", lambda *args: rounds.append(1) or real(*args))
+    out = refine_patch(moved, err, surface, tol)
     assert out is not None and not rounds and np.array_equal(out.tris, patch.tris)
     w = np.array([[a / 6, b / 6, (6 - a - b) / 6] for a in range(7) for b in range(7 - a)])
     distance = np.abs(np.linalg.norm(np.einsum("pk,mkd->mpd", w, nodes[patch.tris]), axis=-1) - 10.0).max(axis=1)

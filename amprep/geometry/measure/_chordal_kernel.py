@@ -88,12 +88,17 @@ def _revolved(kind, prm, u, v, cu, su, cv, sv, sin_b, cos_b):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _centroid(uv, m):
+    """(u, v) of triangle m's (u,v) centroid, as numpy's uv.mean(axis=1) sums it."""
+    return (uv[m, 0, 0] + uv[m, 1, 0] + uv[m, 2, 0]) / 3.0, (uv[m, 0, 1] + uv[m, 1, 1] + uv[m, 2, 1]) / 3.0
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _facing(kind, prm, uv, m, nx, ny, nz, sin_b, cos_b):
     """|n̂ · S_u × S_v| / |S_u × S_v| at triangle m's (u,v) centroid, the tangents in closed form (surfaces.py's
     formulas differentiated: e' = −sin u·X + cos u·Y times the ring's radius, and S_v); 0 where |S_u × S_v| ≤
     1e-9 |S_u||S_v| (a pole, an apex), as surfaces.surface_normals gives it."""
-    u = (uv[m, 0, 0] + uv[m, 1, 0] + uv[m, 2, 0]) / 3.0
-    v = (uv[m, 0, 1] + uv[m, 1, 1] + uv[m, 2, 1]) / 3.0
+    u, v = _centroid(uv, m)
     if kind == PLANE:
         a0, a1, a2, b0, b1, b2 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0
     else:
@@ -203,8 +208,7 @@ def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, scr
         off[m] = np.sqrt(whole)
         facing[m] = 1.0
         if ok and off[m] > screen * best:  # S_u, S_v by central differences of h at the (u,v) centroid, as numpy's
-            u = (uv[m, 0, 0] + uv[m, 1, 0] + uv[m, 2, 0]) / 3.0
-            v = (uv[m, 0, 1] + uv[m, 1, 1] + uv[m, 2, 1]) / 3.0
+            u, v = _centroid(uv, m)
             ax, ay, az, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u + h[0], uper), _wrapped(v, vper),
                                               work, su, sv)
             bx, by, bz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u - h[0], uper), _wrapped(v, vper),

@@ -14,7 +14,7 @@ from amprep.errors import AmprepError
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.progress import checkpoint, within_budget
-from amprep.geometry.core.vectors import cross, dot, norms, turn
+from amprep.geometry.core.vectors import cross, dot, norms, turn, unit_normals
 from amprep.geometry.measure.angles import flip_candidates, min_angles_at, unit_normals_at
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
 from amprep.geometry.meshing.occt_read import FacePatch
@@ -77,7 +77,7 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     neighbours' diagonals and the bad triangles move instead of going. Triangles with a corner over the tolerance
     off the surface (corner_bound) are left as they are."""
     assert patch.uv is not None
-    tris, err = patch.tris, np.array(error, float)
+    tris, err = patch.tris, np.asarray(error, float)
     length_scale = metric_scale(surface, patch.uv)
     scale = length_scale if scale is None else np.asarray(scale, float)
     spacing = min_spacing(tolerance, scale, length_scale)
@@ -150,9 +150,7 @@ def corner_bound(nodes: np.ndarray, uv: np.ndarray, tris: np.ndarray, over: np.n
     if not len(idx):
         return idx
     corners, at = nodes[tris[idx]], uv[tris[idx]]
-    unit = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    size = norms(unit)
-    unit = unit / np.where(size > 0, size, 1.0)[:, None]
+    unit = unit_normals(corners)[0]
     off = np.abs(dot(surface.evaluate(at.reshape(-1, 2)).reshape(-1, 3, 3) - corners, unit[:, None, :])).max(axis=1)
     return idx[off > tolerance]
 
