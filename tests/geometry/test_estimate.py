@@ -104,3 +104,28 @@ def test_the_quality_mesher_chooses_its_evaluator_by_its_own_estimate(monkeypatc
     n = result.estimated_triangles  # every face a B-spline
     assert worth_compiling(n, params.check_order, n) and chosen == [True]
     assert result.mesh.n_triangles > 50_000 and result.max_error <= 0.01
+
+
+def test_the_default_mesher_weighs_free_form_faces_by_their_degree(monkeypatch):
+    """OCCT's top.brep at 0.1 mm: its B-spline faces, of degree up to 11 in v, carry under 2,000 triangles in OCCT's
+    first mesh, too few to pay numba's start-up were they bicubic; weighted by what numpy pays per point of their
+    degrees (numpy_cost) they are over it, and the part is measured on the compiled kernels (3× faster here)."""
+    from amprep.geometry.cad.bspline import numpy_cost
+    from amprep.geometry.cad.surfaces import surface_of
+    from amprep.geometry.measure.chordal import free_form_work, worth_compiling
+    from amprep.geometry.meshing import pipeline
+    from amprep.geometry.meshing.occt_read import bulk_triangulation_arrays
+
+    assert numpy_cost(3, 3) == numpy_cost(1, 1) == 1.0 and numpy_cost(2, 11) == 36 / 16 and numpy_cost(8, 8) == 81 / 16
+    chosen: list[bool] = []
+    real = pipeline.compiled
+    monkeypatch.setattr(pipeline, "compiled", lambda on: chosen.append(on) or real(on))
+    model = read_cad(corpus("occt_top_invalid.brep"))
+    params = MeshParams(tolerance=0.1)
+    result = mesh_model(model, params)
+    assert chosen == [True] and result.max_error <= 0.1
+    surfaces = [surface_of(f) for f in model.faces]
+    counts = [len(b[2]) for b in bulk_triangulation_arrays(model.faces)]  # OCCT's first mesh, left on the faces
+    bicubic = sum(n for n, s in zip(counts, surfaces, strict=True) if s.surface_type == "bspline")
+    assert 0 < bicubic < 2_000 and not worth_compiling(bicubic, params.check_order, bicubic)
+    assert worth_compiling(0, params.check_order, free_form_work(counts, surfaces))

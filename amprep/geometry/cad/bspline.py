@@ -38,6 +38,13 @@ def basis_functions(knots: np.ndarray, degree: int, t: np.ndarray, span: np.ndar
     return basis
 
 
+def numpy_cost(udeg: int, vdeg: int) -> float:
+    """numpy's cost of one point of a degree (p, q) surface over a bicubic's, max(1, (p+1)(q+1)/16): its (p+1)(q+1)
+    homogeneous poles gathered and summed per point, the Cox–de Boor loops per call growing with the degrees (a
+    point measured 1.1 µs bicubic, 2.0 µs at degree 5, 4.7 µs at 10, in calls of 560; a call's fixed part grows more)."""
+    return max(1.0, (udeg + 1) * (vdeg + 1) / 16)
+
+
 def eval_curve(poles: np.ndarray, weights: np.ndarray, knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
     """(N, d) C(t) = Σ N_i(t) w_i P_i / Σ N_i(t) w_i of a (rational) B-spline curve: poles (n, d), weights (n,), flat
     knots (n + degree + 1,), at t (N,)."""

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import lru_cache
 
 import numpy as np
@@ -23,6 +23,11 @@ _warm = False  # warm_kernels ran in this process
 #: ~3× numpy's speed on 2 cores): a call this large runs them unless the enclosing computation chose
 #: (core/compiled.py; the mesher chooses for a whole part)
 COMPILED_MIN_POINTS = 3_000_000
+#: the same for free-form work (free_form_work): the default mesher's rounds in numpy cost 90–400 µs more per weighted
+#: triangle than in the kernels (the 45-face IGES and CTC-02's B-spline twin ~90–100, the lens ~200, OCCT's top.brep,
+#: of degree up to 11, ~400), and most of the start-up is paid while the file is read (read_ahead's warm-up): from
+#: ~2,700 triangles at order 6
+FREE_FORM_MIN_POINTS = COMPILED_MIN_POINTS // 40
 
 
 def load_kernels() -> None:
@@ -83,11 +88,20 @@ def kernels_warm() -> bool:
     return _warm
 
 
-def worth_compiling(triangles: int, order: int, free_form: int = 0) -> bool:
-    """True when measuring `triangles` (of which `free_form` on B-spline or Bézier faces, which numpy evaluates ~5×
-    slower) on the order-k grid pays numba's start-up: the choice a whole computation makes (core.compiled)."""
+def worth_compiling(triangles: int, order: int, free_form: float = 0.0) -> bool:
+    """True when measuring `triangles` on the order-k grid pays numba's start-up, or their free-form work alone does
+    (free_form_work: B-spline and Bézier faces, which numpy evaluates far slower): the choice a whole computation
+    makes (core.compiled)."""
     points = len(barycentric_grid(order))
-    return triangles * points >= COMPILED_MIN_POINTS or free_form * points >= COMPILED_MIN_POINTS / 3
+    return triangles * points >= COMPILED_MIN_POINTS or free_form * points >= FREE_FORM_MIN_POINTS
+
+
+def free_form_work(counts: Sequence[float], surfaces: Sequence[Surface | None]) -> float:
+    """Σ counts[i] · bspline.numpy_cost of face i's degrees over the B-spline and Bézier faces (surfaces[i].data):
+    the triangles of those faces, each weighted by what numpy pays to evaluate a point of its surface."""
+    return float(sum(n * _bspline.numpy_cost(sf.data["udeg"], sf.data["vdeg"])
+                     for n, sf in zip(counts, surfaces, strict=True)
+                     if sf is not None and sf.data is not None and sf.surface_type in ("bspline", "bezier")))
 
 
 def kernels_loaded() -> bool:

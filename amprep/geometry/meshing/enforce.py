@@ -19,7 +19,13 @@ from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
 from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.progress import Progress, ProgressFn, budgeted, checkpoint, grew_over
-from amprep.geometry.measure.chordal import kernels_loaded, load_kernels, triangle_chordal_error, worth_compiling
+from amprep.geometry.measure.chordal import (
+    free_form_work,
+    kernels_loaded,
+    load_kernels,
+    triangle_chordal_error,
+    worth_compiling,
+)
 from amprep.geometry.meshing.face_mesher import boundary_loops, mesh_face
 from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
 from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
@@ -311,7 +317,7 @@ def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned
     """f.estimated: the quality mesher's estimate (prepare.quality_estimate) of the faces of `remesh` with their
     boundary_loops `loops` and planned lattices, each × its uses, and the `kept` triangles other faces already have;
     output_too_large when over the limit. Returns chordal.worth_compiling of that estimate (its B-spline and Bézier
-    share apart): whether the faces are meshed with the compiled kernels, decided by the part alone before any is."""
+    work apart): whether the faces are meshed with the compiled kernels, decided by the part alone before any is."""
     segments = [sum(max(len(f.topo.edge_params.get(f.topo.edge_index(e), ())) - 1, 0) for e in face_edges(f.model.faces[i]))
                 for i in remesh]
     rows = [p.expected if p is not None else None for p in planned]
@@ -319,9 +325,8 @@ def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned
     f.expected = {i: REMESH_PER_FACE + float(n) for i, n in zip(remesh, expected, strict=True)}
     placed = expected * f.uses[remesh]
     f.estimated = refuse_quality_too_large(placed, kept, f.tol, f.params.max_triangles)
-    free_form = sum(n for n, i in zip(placed, remesh, strict=True)
-                    if f.surfaces[i].surface_type in ("bspline", "bezier") and f.surfaces[i].data is not None)  # type: ignore[union-attr]
-    return worth_compiling(f.estimated, f.params.check_order, round(free_form))
+    free_form = free_form_work(placed, [f.surfaces[i] for i in remesh])
+    return worth_compiling(f.estimated, f.params.check_order, free_form)
 
 
 def _open_collapsed_loops(f: FaceStates, faces: set[int]) -> set[int]:

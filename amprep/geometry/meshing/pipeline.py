@@ -21,7 +21,7 @@ from amprep.geometry.core.checks import DEGENERATE_REL_AREA
 from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.mesh import FaceInfo, Mesh
 from amprep.geometry.core.progress import Progress, ProgressFn
-from amprep.geometry.measure.chordal import load_kernels, worth_compiling
+from amprep.geometry.measure.chordal import free_form_work, load_kernels, worth_compiling
 from amprep.geometry.meshing.enforce import FaceStates, enforce_tolerance
 from amprep.geometry.meshing.occt_check import first_look
 from amprep.geometry.meshing.occt_read import FacePatch, bulk_triangulation_arrays
@@ -174,13 +174,12 @@ def _stored(model: CadModel, surfaces: list[Surface | None]) -> list:  # type: i
 
 def _compiled_for(bulk: list, surfaces: list[Surface | None], order: int, estimated: int) -> bool:  # type: ignore[type-arg]
     """True when every face's measure runs the compiled kernels (chordal.worth_compiling of the larger of OCCT's
-    first mesh and the part's estimate, its free-form share as in the first mesh): decided by the part alone. The
+    first mesh and the part's estimate, its free-form work as in the first mesh): decided by the part alone. The
     first mesh alone undercounts a part whose faces it leaves over the tolerance (the DTMB hull at 0.01 mm: 13,128
     triangles, 132,394 once refined, 2.4x the time on numpy)."""
     tri_count = [len(b[2]) if b is not None else 0 for b in bulk]
     total = sum(tri_count)
-    free_form = sum(n for n, sf in zip(tri_count, surfaces, strict=True) if sf is not None and sf.data is not None
-                    and sf.surface_type in ("bspline", "bezier"))
+    free_form = free_form_work(tri_count, surfaces)
     if estimated > total:
-        free_form, total = round(free_form * estimated / max(total, 1)), estimated
+        free_form, total = free_form * estimated / max(total, 1), estimated
     return worth_compiling(total, order, free_form)
