@@ -143,9 +143,16 @@ def _submit(c: httpx.Client, part: Path, key: str, times: list[float], lock: thr
     raise RuntimeError("submit never accepted")
 
 
-def _ended(c: httpx.Client, job_id: str, deadline: float) -> dict:  # type: ignore[type-arg]
+def _ended(c: httpx.Client, job_id: str, deadline: float, s: Stack) -> dict:  # type: ignore[type-arg]
+    """The job's record once it has ended; TimeoutError past `deadline`, RuntimeError at once when a process of the
+    stack has exited (a dead worker leaves its jobs unended until the broker's visibility timeout)."""
     last = None
     while True:
+        dead = [p for p in s.procs if p.poll() is not None]
+        if dead:
+            log = (s.data / "worker.log").read_text(errors="replace")[-3000:]
+            raise RuntimeError(f"{len(dead)} process(es) of the stack exited (codes {[p.returncode for p in dead]}); "
+                               f"the worker's log ends:\n{log}")
         try:
             r = c.get(f"/v1/jobs/{job_id}")
             last = r.json() if r.status_code in (200, 202) else last
@@ -189,7 +196,7 @@ def run_load(s: Stack, part: Path, jobs: int, clients: int, restart_at: float | 
         list(pool.map(client, range(clients)))
     deadline = time.monotonic() + timeout
     with httpx.Client(base_url=s.url, timeout=120) as c:
-        ended = {job_id: _ended(c, job_id, deadline) for job_id in ids.values()}
+        ended = {job_id: _ended(c, job_id, deadline, s) for job_id in ids.values()}
         seconds = time.monotonic() - t0
         listed, cursor = 0, None
         while True:
