@@ -30,6 +30,7 @@ def test_compose_shape():
     redis = services["redis"]
     assert "--appendonly" in redis["command"] and redis["command"][redis["command"].index("--appendonly") + 1] == "yes"
     assert "healthcheck" in redis
+    assert all(s.get("restart") == "unless-stopped" for s in services.values())  # a dead worker comes back
     images = {services[n]["image"] for n in services if n != "redis"}
     assert len(images) == 1  # one image: API and workers differ only by command
     for name in ("api", "worker", "worker-heavy"):
