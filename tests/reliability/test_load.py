@@ -6,7 +6,6 @@ a 500."""
 from __future__ import annotations
 
 import importlib.util
-import json
 import sys
 import time
 from pathlib import Path
@@ -14,6 +13,7 @@ from pathlib import Path
 import httpx
 
 from tests.conftest import corpus
+from tests.service.conftest import submit, wait_status
 
 _spec = importlib.util.spec_from_file_location("bench_load", Path(__file__).resolve().parents[2] / "bench" / "load.py")
 load = importlib.util.module_from_spec(_spec)  # type: ignore[arg-type]
@@ -36,27 +36,21 @@ def test_nothing_lost_or_duplicated_when_redis_restarts_mid_load():
     assert not bad, bad[:5]
 
 
-def _submit(c: httpx.Client, name: str, params: dict) -> str:  # type: ignore[type-arg]
-    r = c.post("/v1/jobs", data={"kind": "convert", "params": json.dumps({**params, "reuse": False})},
-               files={"file": (name, corpus(name).read_bytes())})
-    assert r.status_code == 202, r.text
-    return str(r.json()["id"])
-
-
 def test_a_worker_survives_losing_redis_while_a_job_runs():
     """A worker of two processes, one running a job (its message unacknowledged until the job ends: acks_late), the
     other waiting on the queue (a BRPOP in flight): Redis restarts. The worker reconnects, the job ends once and the
     next job runs. Celery 5.7.0's worker exits here ("Unrecoverable error: AttributeError", kombu's Redis channel
     rebuilding its pool from a transport the consumer had cleared); pyproject keeps celery under 5.7."""
     with load.stack(workers=2) as s, httpx.Client(base_url=s.url, timeout=120) as c:
-        long_job = _submit(c, "nist_ctc02_ap242.stp", {"tolerance": 0.01})
-        deadline = time.monotonic() + 300
-        while c.get(f"/v1/jobs/{long_job}").json()["status"] != "running":
-            assert time.monotonic() < deadline, "the job never started"
-            time.sleep(0.1)
+        r = submit(c, corpus("nist_ctc02_ap242.stp"), params='{"tolerance": 0.01, "reuse": false}')
+        assert r.status_code == 202, r.text
+        long_job = r.json()["id"]
+        wait_status(c, long_job, ("running",), timeout=300)
         s.restart_redis(1.0)
         first = load._ended(c, long_job, time.monotonic() + 600, s)
-        after = load._ended(c, _submit(c, "cq_cube_cylinder_colors.step", {}), time.monotonic() + 300, s)
+        r = submit(c, corpus("cq_cube_cylinder_colors.step"), params='{"reuse": false}')
+        assert r.status_code == 202, r.text
+        after = load._ended(c, r.json()["id"], time.monotonic() + 300, s)
         worker_log = (s.data / "worker.log").read_text()
     assert first["status"] == "succeeded" and after["status"] == "succeeded"
     assert "Unrecoverable" not in worker_log
