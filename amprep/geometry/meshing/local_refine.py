@@ -86,10 +86,12 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
     sign = 1.0 if _signed_area2(pts, tris).sum() >= 0 else -1.0
     codes, count = np.unique(edge_codes(tris, len(pts) + 1), return_counts=True)
     boundary_pairs = np.stack(np.divmod(codes[count == 1], len(pts) + 1), axis=1)  # the face's boundary: kept
+    off = np.zeros(0)
     for _ in range(rounds):
         checkpoint()
         bad = err > tolerance
-        bad[corner_bound(xyz, uv, tris, bad, surface, tolerance)] = False  # no point inside brings them within
+        bound, off = corner_bound(xyz, uv, tris, bad, surface, tolerance, off)
+        bad[bound] = False  # no point inside brings them within
         if not bad.any():
             break
         base = len(pts) + 1
@@ -140,23 +142,28 @@ def refine_patch(patch: FacePatch, error: np.ndarray, surface: Surface, toleranc
 
 
 def corner_bound(nodes: np.ndarray, uv: np.ndarray, tris: np.ndarray, over: np.ndarray, surface: Surface,
-                 tolerance: float) -> np.ndarray:
-    """(k,) ids of the triangles `over` (t,) bool of tris (t, 3) on nodes (n, 3) with (u,v) (n, 2) that have a corner
-    off the surface by more than the tolerance, its distance from the face's surface (surfaces.project_points from its
-    (u,v), in the face's bounds) over it (a boundary node off its face by a B-rep gap over it): the chordal measure
-    counts the corners, so no point inserted inside brings them within it. Refined regardless, each such node's fan
-    grew round after round (CTC-02 at 0.001 mm: one face's 2,222 triangles over became 20,311 of 590,628 after 40
-    rounds). A corner on the surface whose (u,v) is off (its pcurve a way from its 3D curve along the surface) is
-    refined: as the triangles round it shrink their planes take in its offset and they come within (OCCT's
-    hammer.brep at 0.1 mm: judged by its offset from S(u,v) along the triangles' normals, four faces were left over,
-    their edges split to the gap, 24 % more triangles)."""
+                 tolerance: float, known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """((k,) ids of the triangles `over` (t,) bool of tris (t, 3) on nodes (n, 3) with (u,v) (n, 2) that have a corner
+    off the surface by more than the tolerance, (n,) each node's distance from the face's surface (NaN: not needed)):
+    the distance by surfaces.project_points from the node's (u,v), in the face's bounds, taken from `known` (m ≤ n,)
+    (an earlier call's, NaN where not measured) where it holds it. Such a corner is a boundary node off its face by a
+    B-rep gap over the tolerance: the chordal measure counts the corners, so no point inserted inside brings them
+    within it. Refined regardless, each such node's fan grew round after round (CTC-02 at 0.001 mm: one face's 2,222
+    triangles over became 20,311 of 590,628 after 40 rounds). A corner on the surface whose (u,v) is off (its pcurve
+    a way from its 3D curve along the surface) is refined: as the triangles round it shrink their planes take in its
+    offset and they come within (OCCT's hammer.brep at 0.1 mm: judged by its offset from S(u,v) along the triangles'
+    normals, four faces were left over, their edges split to the gap, 24 % more triangles)."""
+    off = np.full(len(nodes), np.nan)
+    if known is not None and len(known):
+        off[:len(known)] = known
     idx = np.flatnonzero(over)
     if not len(idx):
-        return idx
+        return idx, off
     node = np.unique(tris[idx])
-    off = np.zeros(len(nodes))
-    off[node] = project_points(surface, nodes[node], uv[node], within=True)[1]
-    return idx[(off[tris[idx]] > tolerance).any(axis=1)]
+    node = node[np.isnan(off[node])]
+    if len(node):
+        off[node] = project_points(surface, nodes[node], uv[node], within=True)[1]
+    return idx[(off[tris[idx]] > tolerance).any(axis=1)], off
 
 
 #: a triangle is a needle when its area ≤ this × (longest edge)²
