@@ -310,6 +310,13 @@ def _sphere_patch(tol: float):  # type: ignore[no-untyped-def]
     raise AssertionError("no sphere face")
 
 
+def _off_sphere(corners: np.ndarray, order: int) -> np.ndarray:
+    """(m,) the largest distance from the sphere r 10 about the origin, in closed form, of the points of each triangle
+    (corners (m, 3, 3)) on its barycentric grid of `order`."""
+    w = np.array([[a, b, order - a - b] for a in range(order + 1) for b in range(order + 1 - a)]) / order
+    return np.abs(np.linalg.norm(np.einsum("pk,mkd->mpd", w, corners), axis=-1) - 10.0).max(axis=1)
+
+
 def test_triangles_over_by_their_boundary_nodes_alone_are_left_as_they_are(monkeypatch):
     """A sphere whose boundary nodes (seam, poles) stand 3× the tolerance off it, radially (a B-rep gap): no point
     inserted inside lowers the triangles standing on them, since the measure counts their corners. They are left as
@@ -331,8 +338,7 @@ def test_triangles_over_by_their_boundary_nodes_alone_are_left_as_they_are(monke
     monkeypatch.setattr(local_refine, "_retriangulate", lambda *args: rounds.append(1) or real(*args))
     out = refine_patch(moved, err, surface, tol)
     assert out is not None and not rounds and np.array_equal(out.tris, patch.tris)
-    w = np.array([[a / 6, b / 6, (6 - a - b) / 6] for a in range(7) for b in range(7 - a)])
-    distance = np.abs(np.linalg.norm(np.einsum("pk,mkd->mpd", w, nodes[patch.tris]), axis=-1) - 10.0).max(axis=1)
+    distance = _off_sphere(nodes[patch.tris], 6)
     assert (distance[~touching] <= tol).all() and np.allclose(out.error, err, rtol=1e-9, atol=0)
 
 
@@ -358,6 +364,4 @@ def test_corners_on_the_surface_whose_uv_is_off_are_refined_not_left():
     assert out is not None and len(out.tris) > len(patch.tris)
     assert np.array_equal(out.nodes[: len(nodes)], nodes)
     assert (out.error <= tol).all()
-    w = np.array([[a / 12, b / 12, (12 - a - b) / 12] for a in range(13) for b in range(13 - a)])
-    distance = np.abs(np.linalg.norm(np.einsum("pk,mkd->mpd", w, out.nodes[out.tris]), axis=-1) - 10.0)
-    assert distance.max() <= tol
+    assert _off_sphere(out.nodes[out.tris], 12).max() <= tol
