@@ -4,7 +4,7 @@ import { ApiError, call, el, events, fmtSeconds, jobSeconds, json, keyBar, plain
 import { paramsForm } from './form.js';
 
 const $ = (s) => document.querySelector(s);
-const state = { kinds: [], forms: {}, jobs: new Map(), filter: { status: '', kind: '' } };
+const state = { kinds: [], forms: {}, jobs: new Map(), gone: new Set(), filter: { status: '', kind: '' } };
 const keys = keyBar($('#keybar'), () => start());
 
 function setMessage(text, kind = 'info') {
@@ -67,6 +67,7 @@ function dropZone() {
 }
 
 // ---- the jobs list --------------------------------------------------------------------------------------
+const ENDED = ['succeeded', 'failed', 'cancelled'];
 const STATUS_WORDS = { queued: 'queued', running: 'running', succeeded: 'succeeded', failed: 'failed', cancelled: 'cancelled' };
 
 function matches(job) {
@@ -75,7 +76,7 @@ function matches(job) {
 }
 
 function row(job) {
-  const ended = ['succeeded', 'failed', 'cancelled'].includes(job.status);
+  const ended = ENDED.includes(job.status);
   const name = job.input?.file?.name || job.id;
   const pct = Math.round((job.status === 'succeeded' ? 1 : job.progress || 0) * 100);
   const err = job.error ? `${plain(job.error)} (${job.error.code})` : '';
@@ -102,7 +103,21 @@ function render() {
   $('#jobs-empty').hidden = shown.length > 0;
 }
 
+// A list and an event travel on other connections than a DELETE or a cancel, so one that left the server before
+// the change can arrive after it: a deleted job never comes back and an ended one never runs again.
+function stale(job) {
+  const old = state.jobs.get(job.id);
+  return state.gone.has(job.id) || (old !== undefined && ENDED.includes(old.status) && !ENDED.includes(job.status));
+}
+
+function forget(id) {
+  state.gone.add(id);
+  state.jobs.delete(id);
+  render();
+}
+
 function upsert(job) {
+  if (stale(job)) return;
   state.jobs.set(job.id, job);
   const old = document.querySelector(`#jobs tr[data-job="${job.id}"]`);
   if (old && matches(job)) old.replaceWith(row(job));
@@ -112,7 +127,7 @@ function upsert(job) {
 async function remove(job) {
   try {
     const res = await call(`/v1/jobs/${job.id}`, { method: 'DELETE' });
-    if (res.status === 204) { state.jobs.delete(job.id); render(); } else upsert(await res.json());
+    if (res.status === 204) forget(job.id); else upsert(await res.json());
   } catch (e) { setMessage(`${plain({ code: e.code, message: e.message })} (${e.code})`, 'error'); }
 }
 
@@ -121,7 +136,7 @@ async function load() {
   if (state.filter.status) q.set('status', state.filter.status);
   if (state.filter.kind) q.set('kind', state.filter.kind);
   const page = await json(`/v1/jobs?${q}`);
-  for (const j of page.jobs) state.jobs.set(j.id, j);
+  for (const j of page.jobs) if (!stale(j)) state.jobs.set(j.id, j);
   render();
 }
 
@@ -137,7 +152,7 @@ async function follow() {
       for await (const m of events('/v1/events', signal)) {
         wait = 1000;
         const d = JSON.parse(m.data);
-        if (m.event === 'deleted') { state.jobs.delete(d.id); render(); } else if (m.event === 'job') upsert(d);
+        if (m.event === 'deleted') forget(d.id); else if (m.event === 'job') upsert(d);
       }
     } catch (e) {
       if (signal.aborted) return;

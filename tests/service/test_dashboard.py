@@ -279,6 +279,50 @@ def test_cancel_filter_and_delete_from_list(page, service: Service) -> None:
     assert service.client().get(f"/v1/jobs/{busy['id']}").status_code == 404
 
 
+#: counts, in the page, the job lists whose JSON was read (load() renders in the same microtask checkpoint)
+COUNT_LISTS = """
+window.__lists = 0;
+const fetched = window.fetch;
+window.fetch = async (...a) => {
+  const r = await fetched(...a);
+  if (String(a[0]).includes('/v1/jobs?')) {
+    const read = r.json.bind(r);
+    r.json = async () => { const v = await read(); window.__lists += 1; return v; };
+  }
+  return r;
+};
+"""
+
+
+def test_a_list_sent_before_a_delete_does_not_bring_the_row_back(page, service: Service) -> None:
+    """A job list that left the server before a delete and arrives after it (held here by the browser's router) must
+    not show the deleted job again: the delete is final on the page as on the server."""
+    with service.client() as c:
+        job = submit(c, corpus("voron_vhb_din_mount.step"), params='{"reuse": false}').json()
+        assert c.delete(f"/v1/jobs/{job['id']}").json()["status"] == "cancelled"
+    page.add_init_script(COUNT_LISTS)
+    page.goto(service.url + "/")
+    row = page.locator(f"#jobs tr[data-job='{job['id']}']")
+    row.get_by_role("button", name="Delete").wait_for()
+    held: list = []  # type: ignore[type-arg]
+    page.route("**/v1/jobs?*", lambda r: held.append((r, r.fetch())))
+    page.select_option("#filter-status", "cancelled")  # a list is asked for, sent and held
+    for _ in range(LONG // 100):
+        if held:
+            break
+        page.wait_for_timeout(100)
+    assert len(held) == 1, "the page did not ask for the list"
+    assert job["id"] in held[0][1].text()
+    row.get_by_role("button", name="Delete").click()
+    row.wait_for(state="detached")
+    assert service.client().get(f"/v1/jobs/{job['id']}").status_code == 404
+    page.unroute("**/v1/jobs?*")
+    seen = page.evaluate("window.__lists")
+    held[0][0].fulfill(response=held[0][1])
+    page.wait_for_function("n => window.__lists > n", arg=seen)
+    assert row.count() == 0, "the deleted job came back with a list sent before its delete"
+
+
 def test_api_docs_served_locally(page, service: Service) -> None:
     """/docs and /redoc draw the API from this server's own files."""
     page.goto(service.url + "/docs")
