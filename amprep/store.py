@@ -52,6 +52,15 @@ if ARGV[4] == '1' then redis.call('HINCRBY', KEYS[1], 'attempts', 1) end
 return cur
 """
 
+# Mark a job's task sent, only while its record exists (a job deleted meanwhile must not come back as a bare hash):
+# KEYS[1] job hash, KEYS[2] the unstarted set; ARGV[1] the job id, ARGV[2] the time.
+_MARK_SENT = """
+if redis.call('EXISTS', KEYS[1]) == 0 then return 0 end
+redis.call('HSET', KEYS[1], 'sent', '1')
+redis.call('ZADD', KEYS[2], ARGV[2], ARGV[1])
+return 1
+"""
+
 
 def now() -> float:
     return time.time()
@@ -177,6 +186,7 @@ class JobStore:
         self.retention = retention_seconds
         self._transition = self.redis.register_script(_TRANSITION)
         self._rebind = self.redis.register_script(_REBIND)
+        self._mark_sent = self.redis.register_script(_MARK_SENT)
 
     # -- records ---------------------------------------------------------------------------------------------
     def key(self, job_id: str) -> str:
@@ -286,10 +296,7 @@ class JobStore:
 
     def mark_sent(self, job_id: str) -> None:
         """Record that the job's task reached the broker (now: requeue_lost counts from here)."""
-        pipe = self.redis.pipeline()
-        pipe.hset(self.key(job_id), "sent", "1")
-        pipe.zadd(UNSTARTED, {job_id: now()})
-        pipe.execute()
+        self._mark_sent(keys=[self.key(job_id), UNSTARTED], args=[job_id, repr(now())])
 
     def was_sent(self, job_id: str) -> bool:
         return self.redis.hget(self.key(job_id), "sent") == "1"

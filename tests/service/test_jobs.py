@@ -204,6 +204,20 @@ def test_delete_a_finished_job_removes_it_and_its_files(service):
         assert c.delete(f"/v1/jobs/{job['id']}").status_code == 404
 
 
+def test_a_task_marked_sent_after_its_job_went_leaves_no_record(service):
+    """The API marks a job's task sent after queueing it; a job deleted in between (its id is on the event stream
+    at once) must stay deleted, not come back as a record without fields."""
+    with service.client() as c:
+        job = submit(c, corpus(PART), params='{"reuse": false}').json()
+        c.delete(f"/v1/jobs/{job['id']}")
+        if c.get(f"/v1/jobs/{job['id']}").status_code == 200:
+            assert c.delete(f"/v1/jobs/{job['id']}").status_code == 204
+        service.store.mark_sent(job["id"])
+        assert not service.store.redis.exists(service.store.key(job["id"]))
+        assert c.get(f"/v1/jobs/{job['id']}").status_code == 404
+        assert job["id"] not in [j["id"] for j in c.get("/v1/jobs", params={"limit": 200}).json()["jobs"]]
+
+
 def test_identical_input_reuses_the_result_and_says_so(service):
     with service.client() as c:
         first = submit(c, corpus("featuretype_inch_ap214.step"), params='{"tolerance": 0.07}', wait=120).json()
