@@ -19,11 +19,13 @@ from amprep.geometry.refine.sma import Refinement
 
 
 def _errors(verts: np.ndarray, tris: np.ndarray, uvs: np.ndarray, fids: np.ndarray, faces: np.ndarray,
-            surfaces: dict[int, Surface], order: int) -> np.ndarray:
-    """(m,) chordal error of the triangles of `faces` (0 elsewhere)."""
-    err = np.zeros(len(tris))
+            surfaces: dict[int, Surface], order: int, known: np.ndarray | None = None) -> np.ndarray:
+    """(m,) chordal error of the triangles of `faces` (0 elsewhere); where `known` (m,) is not nan, its value (a
+    triangle kept whole since it was measured: each triangle's error is its own, whatever else is measured with it)."""
+    err = np.zeros(len(tris)) if known is None else np.nan_to_num(known, nan=0.0)
+    todo = np.ones(len(tris), bool) if known is None else np.isnan(known)
     for f in faces:
-        t = np.flatnonzero(fids == f)
+        t = np.flatnonzero((fids == f) & todo)
         if len(t):
             err[t] = triangle_chordal_error(verts[tris[t]], uvs[t], surfaces[int(f)], order)
     return err
@@ -175,22 +177,24 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
     parent = np.arange(mesh.n_triangles)
     chosen = np.isin(fids, faces)
     unsplittable: set[tuple[int, int]] = set()  # contour edges with no B-rep edge behind them, or whose pcurves miss it
+    seen: dict[tuple[int, int], tuple[bytes, tuple[int, float]]] = {}  # contour edges resolved, by vertex pair
     outside: set[int] = set()  # inner edges (pair codes) whose (u,v) midpoint is off their face's trimmed domain
     tol = 0.5 * target  # how far a pcurve's point may lie from the 3D edge's for the split to be taken
     poles = pole_vertices(verts, tris, uvs, fids, vdim, surfaces, faces)
     n_faces = int(fids.max()) + 1 if len(fids) else 1
+    known = None
     for _ in range(max_rounds):
         pole = _pole_corners(tris, fids, poles, n_faces)  # the same triangles until this round's bisection
         uvs = _centre_poles(uvs, pole)
         current = Mesh(verts, tris, fids, None, vdim, vent, vpar)
-        err = _errors(verts, tris, uvs, fids, faces, surfaces, order)
+        err = _errors(verts, tris, uvs, fids, faces, surfaces, order, known)
         edge_id, inner = face_edge_table(current)
         count = np.bincount(edge_id.ravel(), minlength=len(inner))
         corners = verts[tris]
         # contour edges of chosen triangles that can be split on both sides: B-rep edge known, two triangles
         contour_slots = ~inner[edge_id] & chosen[:, None] & (count[edge_id] == 2)
         resolved = (_resolve_contours(curves, current, contour_slots, edge_id, len(inner), uvs, surfaces, tol,
-                                      unsplittable) if curves is not None else {})
+                                      unsplittable, seen) if curves is not None else {})
         on_curve = np.zeros(len(inner), bool)
         if resolved:
             on_curve[np.fromiter(resolved, np.int64)] = True
@@ -227,6 +231,8 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         verts = np.concatenate([verts, new_xyz])
         vdim, vent, vpar = np.concatenate([vdim, new_dim]), np.concatenate([vent, new_ent]), np.concatenate([vpar, new_par])
         tris, uvs, src = _bisect(tris, uvs, vid, mid_uv, cand, n_split)
+        known = np.full(len(tris), np.nan)
+        known[:int((n_split == 0).sum())] = err[n_split == 0]  # _bisect puts the whole ones first
         fids, chosen, parent = fids[src], chosen[src], parent[src]
     uvs = _centre_poles(uvs, _pole_corners(tris, fids, poles, n_faces))
     order_ = np.argsort(parent, kind="stable")
@@ -285,11 +291,12 @@ def _vertex_keys(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _resolve_contours(curves: EdgeCurves, current: Mesh, contour_slots: np.ndarray, edge_id: np.ndarray, n_edges: int,
-                      uvs: np.ndarray, surfaces: dict[int, Surface], tol: float,
-                      unsplittable: set[tuple[int, int]]) -> dict[int, tuple[int, float]]:
+                      uvs: np.ndarray, surfaces: dict[int, Surface], tol: float, unsplittable: set[tuple[int, int]],
+                      seen: dict[tuple[int, int], tuple[bytes, tuple[int, float]]]) -> dict[int, tuple[int, float]]:
     """{edge id: (B-rep edge, mid parameter)} of the contour edges (contour_slots (m, 3)) that can be split on both
     sides: the B-rep edge behind them found and both faces' pcurves within `tol` of it; the others are added to
-    `unsplittable` (vertex pairs) and never tried again."""
+    `unsplittable` (vertex pairs) and never tried again. `seen` keeps, by vertex pair, each one found with what it was
+    found from (its sides' faces and (u,v) ends): an edge left whole in a later round is not resolved again."""
     tris, fids = current.triangles, current.face_ids
     resolved: dict[int, tuple[int, float]] = {}
     r_, c_ = np.nonzero(contour_slots)
@@ -299,12 +306,19 @@ def _resolve_contours(curves: EdgeCurves, current: Mesh, contour_slots: np.ndarr
         key = (min(a, b), max(a, b))
         if e in resolved or key in unsplittable:
             continue
-        hit = curves.resolve(current, a, b)
         sides = slot_order[slot_start[e]:slot_start[e] + 2]
-        if hit is None or not _on_both_faces(curves, hit, sides // 3, sides % 3, uvs, fids, surfaces, tol):
+        rows, cols = sides // 3, sides % 3
+        given = b"".join(sorted(fids[r].tobytes() + uvs[r, c].tobytes() + uvs[r, (c + 1) % 3].tobytes()
+                                for r, c in zip(rows.tolist(), cols.tolist(), strict=True)))
+        if key in seen and seen[key][0] == given:
+            resolved[e] = seen[key][1]
+            continue
+        hit = curves.resolve(current, a, b)
+        if hit is None or not _on_both_faces(curves, hit, rows, cols, uvs, fids, surfaces, tol):
             unsplittable.add(key)
         else:
             resolved[e] = hit
+            seen[key] = (given, hit)
     return resolved
 
 
