@@ -189,15 +189,9 @@ def adaptive_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[in
         current = Mesh(verts, tris, fids, None, vdim, vent, vpar)
         err = _errors(verts, tris, uvs, fids, faces, surfaces, order, known)
         edge_id, inner = face_edge_table(current)
-        count = np.bincount(edge_id.ravel(), minlength=len(inner))
         corners = verts[tris]
-        # contour edges of chosen triangles that can be split on both sides: B-rep edge known, two triangles
-        contour_slots = ~inner[edge_id] & chosen[:, None] & (count[edge_id] == 2)
-        resolved = (_resolve_contours(curves, current, contour_slots, edge_id, len(inner), uvs, surfaces, tol,
-                                      unsplittable, seen) if curves is not None else {})
-        on_curve = np.zeros(len(inner), bool)
-        if resolved:
-            on_curve[np.fromiter(resolved, np.int64)] = True
+        resolved, on_curve = _splittable_contours(curves, current, chosen, edge_id, inner, uvs, surfaces, tol,
+                                                  unsplittable, seen)
         splittable = (inner[edge_id] | on_curve[edge_id]) & chosen[:, None]
         length = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2)  # edge s: corner s → s+1
         own_mid = _mid_uv(uvs, pole)  # (m, 3, 2)
@@ -288,6 +282,24 @@ def _vertex_keys(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return (mesh.vertex_dim if mesh.vertex_dim is not None else np.full(mesh.n_vertices, -1, np.int8),
             mesh.vertex_entity if mesh.vertex_entity is not None else np.full(mesh.n_vertices, -1, np.int32),
             mesh.vertex_param if mesh.vertex_param is not None else np.full(mesh.n_vertices, np.nan))
+
+
+def _splittable_contours(curves: EdgeCurves | None, current: Mesh, chosen: np.ndarray, edge_id: np.ndarray,
+                         inner: np.ndarray, uvs: np.ndarray, surfaces: dict[int, Surface], tol: float,
+                         unsplittable: set[tuple[int, int]], seen: dict[tuple[int, int], tuple[bytes, tuple[int, float]]]
+                         ) -> tuple[dict[int, tuple[int, float]], np.ndarray]:
+    """(_resolve_contours' {edge id: (B-rep edge, mid parameter)}, (edges,) bool: those edges) of the contour edges
+    of chosen triangles with two triangles (none without `curves`)."""
+    on_curve = np.zeros(len(inner), bool)
+    if curves is None:
+        return {}, on_curve
+    count = np.bincount(edge_id.ravel(), minlength=len(inner))
+    contour_slots = ~inner[edge_id] & chosen[:, None] & (count[edge_id] == 2)
+    resolved = _resolve_contours(curves, current, contour_slots, edge_id, len(inner), uvs, surfaces, tol,
+                                 unsplittable, seen)
+    if resolved:
+        on_curve[np.fromiter(resolved, np.int64)] = True
+    return resolved, on_curve
 
 
 def _resolve_contours(curves: EdgeCurves, current: Mesh, contour_slots: np.ndarray, edge_id: np.ndarray, n_edges: int,
