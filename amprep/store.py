@@ -172,6 +172,29 @@ return 0
 """
 
 
+#: a job directory without a record, or a temporary file, unchanged this long is left over (a job deleted while its
+#: worker still wrote its files, a crash between storing an upload and creating its record, an archive whose response
+#: broke off); an upload or a response takes far less
+ORPHAN_GRACE = 3600.0
+#: seconds between two searches for left-over files (each lists the job directories)
+ORPHAN_SWEEP = 600
+
+
+def _entries(folder: Path) -> list[Path]:
+    try:
+        return list(folder.iterdir())
+    except FileNotFoundError:
+        return []
+
+
+def _changed(path: Path) -> float:
+    """Its last change (mtime); +inf when it went meanwhile."""
+    try:
+        return path.stat().st_mtime
+    except FileNotFoundError:
+        return float("inf")
+
+
 class JobStore:
     """Job records (Redis) and artifact files (a directory) behind one small API; safe across processes."""
 
@@ -365,11 +388,12 @@ class JobStore:
 
     # -- retention -------------------------------------------------------------------------------------------
     def sweep(self) -> int:
-        """Delete ended jobs older than the retention (at most once a minute, or per retention/4, across all processes)."""
+        """Delete ended jobs older than the retention (at most once a minute, or per retention/4, across all
+        processes), and left-over files (sweep_orphans, at most every ORPHAN_SWEEP seconds)."""
+        removed = self.sweep_orphans() if self.redis.set(f"{P}orphan-lock", "1", nx=True, ex=ORPHAN_SWEEP) else 0
         if not self.redis.set(f"{P}sweep-lock", "1", nx=True, ex=max(1, min(60, self.retention // 4))):
-            return 0
+            return removed
         cutoff = now() - self.retention
-        removed = 0
         for job_id in self.redis.zrangebyscore(f"{P}jobs", "-inf", cutoff):
             job = self.get(job_id)
             if job is None:
@@ -378,6 +402,27 @@ class JobStore:
                 removed += 1
             elif job.status in TERMINAL and (job.finished_at or job.created_at) < cutoff:
                 self.delete(job)
+                removed += 1
+        return removed
+
+    def sweep_orphans(self) -> int:
+        """Remove each job directory that has no record and each temporary file (an archive being sent), last changed
+        over ORPHAN_GRACE seconds ago; the number removed."""
+        old = now() - ORPHAN_GRACE
+        stale = [d for d in _entries(self.root) if d.is_dir() and d.name.isalnum() and _changed(d) < old]
+        removed = 0
+        for s in range(0, len(stale), 1000):
+            batch = stale[s:s + 1000]
+            pipe = self.redis.pipeline(transaction=False)
+            for d in batch:
+                pipe.exists(self.key(d.name))
+            for d, kept in zip(batch, pipe.execute(), strict=True):
+                if not kept:
+                    shutil.rmtree(d, ignore_errors=True)
+                    removed += 1
+        for f in _entries(self.root.parent / "tmp"):
+            if f.is_file() and _changed(f) < old:
+                f.unlink(missing_ok=True)
                 removed += 1
         return removed
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import time
 
 import numpy as np
 import pytest
@@ -216,6 +217,34 @@ def test_a_task_marked_sent_after_its_job_went_leaves_no_record(service):
         assert not service.store.redis.exists(service.store.key(job["id"]))
         assert c.get(f"/v1/jobs/{job['id']}").status_code == 404
         assert job["id"] not in [j["id"] for j in c.get("/v1/jobs", params={"limit": 200}).json()["jobs"]]
+
+
+def test_the_sweep_removes_left_over_files_and_nothing_else(service):
+    """A job directory with no record (its job deleted while a worker still wrote there, or a crash before the record
+    was made) and a temporary archive, both unchanged for over ORPHAN_GRACE, are removed by the worker's sweep; a
+    directory that has a record, and fresh left-overs (an upload in progress), are kept."""
+    import os
+
+    from amprep.store import ORPHAN_GRACE, P
+
+    st = service.store
+    with service.client() as c:
+        kept = submit(c, corpus(PART), wait=60, params='{"reuse": false}').json()
+    old = time.time() - 2 * ORPHAN_GRACE
+    orphan, fresh, tmp = st.job_dir("0rphan0000000001"), st.job_dir("0rphan0000000002"), st.root.parent / "tmp"
+    for d in (orphan / "out", fresh / "input", tmp):
+        d.mkdir(parents=True, exist_ok=True)
+    (orphan / "out" / "mesh.stl").write_bytes(b"x" * 84)
+    (tmp / "broken.zip").write_bytes(b"PK")
+    for path in (orphan, tmp / "broken.zip", st.job_dir(kept["id"])):
+        os.utime(path, (old, old))
+    st.redis.delete(f"{P}orphan-lock", f"{P}sweep-lock")
+    assert st.sweep() >= 2
+    assert not orphan.exists() and not (tmp / "broken.zip").exists()
+    assert fresh.exists() and st.job_dir(kept["id"]).exists()
+    with service.client() as c:
+        assert c.get(kept["artifacts"][0]["url"]).status_code == 200
+    st.discard_files("0rphan0000000002")
 
 
 def test_identical_input_reuses_the_result_and_says_so(service):
