@@ -206,6 +206,7 @@ class JobStore:
         self.redis = redis.Redis.from_url(redis_url, decode_responses=True, health_check_interval=30, retry=retry,
                                           retry_on_error=[redis.ConnectionError, redis.TimeoutError])
         self.root = Path(data_dir) / "jobs"
+        self.tmp = Path(data_dir) / "tmp"  # files made for one response (archives); sweep_orphans removes stragglers
         self.retention = retention_seconds
         self._transition = self.redis.register_script(_TRANSITION)
         self._rebind = self.redis.register_script(_REBIND)
@@ -420,7 +421,7 @@ class JobStore:
                 if not kept:
                     shutil.rmtree(d, ignore_errors=True)
                     removed += 1
-        for f in _entries(self.root.parent / "tmp"):
+        for f in _entries(self.tmp):
             if f.is_file() and _changed(f) < old:
                 f.unlink(missing_ok=True)
                 removed += 1

@@ -295,9 +295,8 @@ async def job_events(job_id: str, request: Request, store: StoreDep, owner: Owne
 
 def _zip(job: Job, store: Any) -> Path:
     """A temporary zip of the job's artifacts (deflated, level 1: meshes compress by half at little cost)."""
-    tmp = store.root.parent / "tmp"
-    tmp.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f"{job.id}-", suffix=".zip", dir=tmp)
+    store.tmp.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f"{job.id}-", suffix=".zip", dir=store.tmp)
     os.close(fd)
     with zipfile.ZipFile(name, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
         for a in job.artifacts:

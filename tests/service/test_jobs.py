@@ -231,7 +231,7 @@ def test_the_sweep_removes_left_over_files_and_nothing_else(service):
     with service.client() as c:
         kept = submit(c, corpus(PART), wait=60, params='{"reuse": false}').json()
     old = time.time() - 2 * ORPHAN_GRACE
-    orphan, fresh, tmp = st.job_dir("0rphan0000000001"), st.job_dir("0rphan0000000002"), st.root.parent / "tmp"
+    orphan, fresh, tmp = st.job_dir("0rphan0000000001"), st.job_dir("0rphan0000000002"), st.tmp
     for d in (orphan / "out", fresh / "input", tmp):
         d.mkdir(parents=True, exist_ok=True)
     (orphan / "out" / "mesh.stl").write_bytes(b"x" * 84)
