@@ -10,7 +10,7 @@ from tests.conftest import corpus
 
 # a fresh process on one core (faces meshed in it, not in forked children whose dispatches it cannot see), every
 # call large enough for the kernels: the quality mesher's flips and smoothing on the hull's B-splines, the default
-# mesher's chordal error, and a Butterfly level; then each kernel's cache hits and misses
+# mesher's chordal error, the projections of both, and a Butterfly level; then each kernel's cache hits and misses
 _JOB = """
 import json, os, sys
 os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
@@ -26,11 +26,11 @@ model = read_cad(sys.argv[1])
 r = mesh_model(model, MeshParams(tolerance=0.34, mesher="quality"))
 mesh_model(model, MeshParams(tolerance=0.34))
 butterfly_refine(r.mesh, ButterflyParams(levels=1))
-from amprep.geometry.cad import _bspline_kernel
+from amprep.geometry.cad import _bspline_kernel, _projection_kernel
 from amprep.geometry.measure import _angle_kernel, _chordal_kernel
 from amprep.geometry.refine import _ring_kernel
 stats = {}
-for mod in (_bspline_kernel, _chordal_kernel, _angle_kernel, _ring_kernel):
+for mod in (_bspline_kernel, _projection_kernel, _chordal_kernel, _angle_kernel, _ring_kernel):
     for name, fn in vars(mod).items():
         if isinstance(fn, numba.core.registry.CPUDispatcher) and fn.signatures:
             stats[mod.__name__ + "." + name] = (sum(fn.stats.cache_hits.values()), sum(fn.stats.cache_misses.values()))
@@ -49,5 +49,5 @@ def test_a_fresh_process_after_amprep_warm_compiles_no_kernel(tmp_path):
     assert job.returncode == 0, job.stderr
     stats = json.loads(job.stdout.strip().splitlines()[-1])
     dispatched = {name.rsplit(".", 2)[-2] for name in stats}
-    assert dispatched == {"_bspline_kernel", "_chordal_kernel", "_angle_kernel", "_ring_kernel"}, stats
+    assert dispatched == {"_bspline_kernel", "_projection_kernel", "_chordal_kernel", "_angle_kernel", "_ring_kernel"}, stats
     assert all(hits > 0 and misses == 0 for hits, misses in stats.values()), json.dumps(stats, indent=0)

@@ -145,3 +145,14 @@ def kernel_bases(cache: dict, uknots: np.ndarray, udeg: int, vknots: np.ndarray,
             out.append((knots, *span_bernstein(knots, deg, n)))
         cache["_bases"] = tuple(out)
     return cache["_bases"]
+
+
+def kernel_arguments(d: dict) -> tuple:  # type: ignore[type-arg]
+    """(pw (nu, nv, 4), ub, vb, udeg, vdeg, uper (2,), vper (2,)): a B-spline surface's data (surfaces.bspline_data's
+    dict) as the compiled kernels take it, made once into `d`; a direction not periodic has per = (0, 0)."""
+    if "_kernel_args" not in d:
+        pw = homogeneous_poles(d["poles"], d["weights"])
+        ub, vb = kernel_bases(d, d["uknots"], int(d["udeg"]), d["vknots"], int(d["vdeg"]), pw.shape[:2])
+        per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
+        d["_kernel_args"] = (pw, ub, vb, int(d["udeg"]), int(d["vdeg"]), per[0], per[1])
+    return d["_kernel_args"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 from OCP.BRepAdaptor import BRepAdaptor_Surface
@@ -23,9 +23,16 @@ from OCP.GeomAbs import (
 from OCP.GeomConvert import GeomConvert
 from OCP.TopoDS import TopoDS_Face
 
-from amprep.geometry.cad.bspline import eval_homogeneous, homogeneous_poles
+from amprep.geometry.cad.bspline import (
+    COMPILED_MIN_POINTS,
+    eval_homogeneous,
+    fork_safe_threads,
+    homogeneous_poles,
+    kernel_arguments,
+)
 from amprep.geometry.cad.occt_arrays import array1, vec
 from amprep.geometry.cad.swept import curve_of, extrusion, revolution
+from amprep.geometry.core.compiled import use_compiled
 from amprep.geometry.core.vectors import cross
 
 SURFACE_TYPES = {
@@ -129,6 +136,12 @@ def project_settled(surface: Surface, points: np.ndarray, uv0: np.ndarray, itera
     last = np.zeros(len(uv))
     span = uv_extent(surface)
     lo, hi = parameter_box(surface) if within else (np.full(2, -np.inf), np.full(2, np.inf))
+    kernel = _compiled_projection(surface, len(uv))
+    if kernel is not None:
+        dist = np.empty(len(uv))
+        uv = np.ascontiguousarray(uv)
+        kernel(np.ascontiguousarray(points, dtype=float), uv, lo, hi, span, int(iterations), float(settle), dist, last)
+        return uv, dist, last < settle
     uv = np.clip(uv, lo, hi)
     live = np.arange(len(uv))
     for _ in range(iterations):
@@ -150,6 +163,22 @@ def project_settled(surface: Surface, points: np.ndarray, uv0: np.ndarray, itera
         uv[live] = new
         live = live[last[live] >= settle]  # the step taken: a point held at its face's bounds asks to go on out
     return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1), last < settle
+
+
+def _compiled_projection(surface: Surface, points: int) -> Callable[..., None] | None:
+    """The compiled form of project_settled's loop for a closed-form or B-spline surface (_projection_kernel.py), where
+    core.compiled.use_compiled says (the computation's choice, else a call of ≥ COMPILED_MIN_POINTS points); None:
+    numpy's."""
+    kind = surface.closed_form
+    d = surface.data if surface.surface_type in ("bspline", "bezier") else None
+    if (kind is None and d is None) or not use_compiled(points, COMPILED_MIN_POINTS):
+        return None
+    fork_safe_threads()
+    from amprep.geometry.cad import _projection_kernel as compiled_kernel
+
+    if kind is not None:
+        return partial(compiled_kernel.project_closed_form, kind[0], kind[1])
+    return partial(compiled_kernel.project_bspline, *kernel_arguments(d))
 
 
 def plane(o: np.ndarray, x: np.ndarray, y: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:

@@ -5,6 +5,7 @@ import numpy as np
 from numba import njit, prange
 
 from amprep.geometry.cad._bspline_kernel import point_kernel, scratch
+from amprep.geometry.cad._projection_kernel import closed_form_point, wrapped
 from amprep.geometry.cad.surfaces import CONE, CYLINDER, PLANE, SPHERE, TORUS
 
 
@@ -62,29 +63,6 @@ def _turns(a, m, k, cos_t, sin_t):
             cos_t[i, j], sin_t[i, j] = cj, sj
             cj, sj = cj * cb - sj * sb, cj * sb + sj * cb
         ci, si = ci * ca - si * sa, ci * sa + si * ca
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _revolved(kind, prm, u, v, cu, su, cv, sv, sin_b, cos_b):
-    """S(u,v) of a closed-form surface given cos u, sin u, cos v, sin v; prm = O(3), X(3), Y(3), Z(3), a, b (radius /
-    semi-angle / radii), sin_b, cos_b = sin b, cos b (a cone's semi-angle)."""
-    if kind == PLANE:
-        c0, c1, c2 = u, v, 0.0
-    elif kind == CYLINDER:
-        c0, c1, c2 = prm[12] * cu, prm[12] * su, v
-    elif kind == CONE:
-        rad = prm[12] + v * sin_b
-        c0, c1, c2 = rad * cu, rad * su, v * cos_b
-    elif kind == SPHERE:
-        rc = prm[12] * cv
-        c0, c1, c2 = rc * cu, rc * su, prm[12] * sv
-    else:  # TORUS
-        rad = prm[12] + prm[13] * cv
-        c0, c1, c2 = rad * cu, rad * su, prm[13] * sv
-    x = prm[0] + c0 * prm[3] + c1 * prm[6] + c2 * prm[9]
-    y = prm[1] + c0 * prm[4] + c1 * prm[7] + c2 * prm[10]
-    z = prm[2] + c0 * prm[5] + c1 * prm[8] + c2 * prm[11]
-    return x, y, z
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -152,7 +130,7 @@ def _analytic_range(kind, prm, corners, uv, w, ij, k, stop, screen, out, off, fa
             for p in range(w.shape[0]):
                 u, v = _sample(w, uv, m, p)
                 i, j = ij[p, 0], ij[p, 1]
-                xyz = _revolved(kind, prm, u, v, cu[i, j], su[i, j], cv[i, j], sv[i, j], sin_b, cos_b)
+                xyz = closed_form_point(kind, prm, u, v, cu[i, j], su[i, j], cv[i, j], sv[i, j], sin_b, cos_b)
                 best = max(best, _distance(c, nx, ny, nz, xyz))
                 whole = max(whole, _offset2(c, w, p, xyz))
                 if best > stop:
@@ -181,12 +159,6 @@ def analytic_chordal_serial(kind, prm, corners, uv, w, ij, k, stop, screen, out,
     _analytic_range(kind, prm, corners, uv, w, ij, k, stop, screen, out, off, facing, 0, corners.shape[0])
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _wrapped(t, per):
-    """t moved into the period [per[0], per[1]) (per[1] ≤ per[0]: not periodic, t as it is)."""
-    return per[0] + (t - per[0]) % (per[1] - per[0]) if per[1] > per[0] else t
-
-
 @njit(cache=True, nogil=True)
 def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, screen, h, out, off, facing, start, end):
     work = scratch(udeg, vdeg)
@@ -198,7 +170,7 @@ def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, scr
         if ok:
             for p in range(w.shape[0]):
                 u, v = _sample(w, uv, m, p)
-                x, y, z, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u, uper), _wrapped(v, vper), work,
+                x, y, z, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, wrapped(u, uper), wrapped(v, vper), work,
                                                su, sv)
                 best = max(best, _distance(c, nx, ny, nz, (x, y, z)))
                 whole = max(whole, _offset2(c, w, p, (x, y, z)))
@@ -209,13 +181,13 @@ def _bspline_range(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, w, stop, scr
         facing[m] = 1.0
         if ok and off[m] > screen * best:  # S_u, S_v by central differences of h at the (u,v) centroid, as numpy's
             u, v = _centroid(uv, m)
-            ax, ay, az, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u + h[0], uper), _wrapped(v, vper),
+            ax, ay, az, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, wrapped(u + h[0], uper), wrapped(v, vper),
                                               work, su, sv)
-            bx, by, bz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u - h[0], uper), _wrapped(v, vper),
+            bx, by, bz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, wrapped(u - h[0], uper), wrapped(v, vper),
                                               work, su, sv)
-            cx, cy, cz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u, uper), _wrapped(v + h[1], vper),
+            cx, cy, cz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, wrapped(u, uper), wrapped(v + h[1], vper),
                                               work, su, sv)
-            dx, dy, dz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, _wrapped(u, uper), _wrapped(v - h[1], vper),
+            dx, dy, dz, su, sv = point_kernel(pw, ub, vb, udeg, vdeg, wrapped(u, uper), wrapped(v - h[1], vper),
                                               work, su, sv)
             tu = ((ax - bx) / (2 * h[0]), (ay - by) / (2 * h[0]), (az - bz) / (2 * h[0]))
             tv = ((cx - dx) / (2 * h[1]), (cy - dy) / (2 * h[1]), (cz - dz) / (2 * h[1]))

@@ -8,7 +8,14 @@ from functools import lru_cache
 import numpy as np
 
 from amprep.geometry.cad import bspline as _bspline
-from amprep.geometry.cad.surfaces import Surface, parameter_box, project_points, surface_normals, uv_extent
+from amprep.geometry.cad.surfaces import (
+    Surface,
+    parameter_box,
+    project_points,
+    project_settled,
+    surface_normals,
+    uv_extent,
+)
 from amprep.geometry.core.compiled import compiled, use_compiled
 from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import norms, unit_normals
@@ -43,8 +50,8 @@ def load_kernels() -> None:
 
 
 def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
-    """load_kernels(), then calls of each kernel (serial and parallel) on a cylinder and a B-spline face with the types
-    of real calls: numba's first dispatch (its typing registry, ~0.3 s) is paid here, e.g. while another process
+    """load_kernels(), then calls of each kernel (serial and parallel, and the projection's) on a cylinder and a B-spline
+    face with the types of real calls: numba's first dispatch (its typing registry, ~0.3 s) is paid here, e.g. while another process
     reads the file. numba is imported first (~0.3 s); when `stop()` is then True (the file is read already: a small
     part, whose numpy measures cost less than the ~0.5 s left) nothing is loaded and the kernels stay unused."""
     _bspline.fork_safe_threads()  # imports numba
@@ -78,6 +85,7 @@ def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
             for tris, points in ((1, 1), (_kernels.BLOCK + 1, EVAL_BLOCK + 1)):  # serial, then parallel kernels
                 surface.evaluate(np.repeat(uv[0], points, axis=0))
                 triangle_chordal_error(np.repeat(corners, tris, axis=0), np.repeat(uv, tris, axis=0), surface)
+            project_settled(surface, corners[0], uv[0], within=True)
     warm_angle_kernels()
     global _warm
     _warm = True
@@ -197,14 +205,10 @@ def _kernel_call(kind: tuple[int, np.ndarray] | None, d: dict | None, corners: n
         fn(kind[0], kind[1], corners, uv, np.ascontiguousarray(w), ij, k, float(stop), TILT_SCREEN, out, off, cos)
         return
     assert d is not None
-    if "_pw" not in d:  # poles·weights | weights (nu, nv, 4), made once per surface
-        d["_pw"] = np.ascontiguousarray(np.concatenate([d["poles"] * d["weights"][..., None],
-                                                        d["weights"][..., None]], axis=2))
-    per = [np.array(p if p is not None else (0.0, 0.0), dtype=np.float64) for p in (d["uperiod"], d["vperiod"])]
-    ub, vb = _bspline.kernel_bases(d, d["uknots"], int(d["udeg"]), d["vknots"], int(d["vdeg"]), d["_pw"].shape[:2])
+    pw, ub, vb, udeg, vdeg, uper, vper = _bspline.kernel_arguments(d)
     fn = _kernels.bspline_chordal_serial if serial else _kernels.bspline_chordal_kernel
-    fn(d["_pw"], ub, vb, int(d["udeg"]), int(d["vdeg"]), per[0], per[1], corners, uv, np.ascontiguousarray(w),
-       float(stop), TILT_SCREEN, np.ascontiguousarray(h, dtype=np.float64), out, off, cos)
+    fn(pw, ub, vb, udeg, vdeg, uper, vper, corners, uv, np.ascontiguousarray(w), float(stop), TILT_SCREEN,
+       np.ascontiguousarray(h, dtype=np.float64), out, off, cos)
 
 
 #: a triangle whose normal is over 10° off the surface's (|cos| under TILT_MAX) is also measured by its points' distance

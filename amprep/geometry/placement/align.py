@@ -108,9 +108,12 @@ def _icp(tree: cKDTree, cad_points: np.ndarray, pts: np.ndarray, R: np.ndarray, 
     the first SCORE_POINTS, inlier_distance), each query bounded; stops when a round moves by < 1e-12."""
     for _ in range(rounds):
         moved = pts @ R.T + t
-        near, _ = tree.query(moved[:SCORE_POINTS], distance_upper_bound=reach)
+        near, first = tree.query(moved[:SCORE_POINTS], distance_upper_bound=reach, workers=-1)
         trim = max(3 * float(np.median(np.minimum(near, reach))), inlier_distance)
-        d, idx = tree.query(moved, distance_upper_bound=trim, workers=-1)
+        if len(moved) <= SCORE_POINTS:  # the nearest within reach ≥ trim are those within trim (a query costs the same)
+            d, idx = np.where(near < trim, near, np.inf), first
+        else:
+            d, idx = tree.query(moved, distance_upper_bound=trim, workers=-1)
         keep = np.isfinite(d)
         if keep.sum() < 3:
             break

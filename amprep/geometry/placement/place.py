@@ -81,8 +81,8 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
                 tree=cloud.tree)
     surfaces = {i: surface_of(f) for i, f in enumerate(model.faces)}
     prog("isolating faces", 0.8)
-    # each round projects every corner on its candidate faces, a few points per call: B-splines by the compiled
-    # evaluator where _worth_compiling says (decided by the input, not by what is loaded)
+    # each round projects every corner on its candidate faces, a few points per call: by the compiled kernels where
+    # _worth_compiling says (decided by the input, not by what is loaded)
     with compiled(_worth_compiling(user, surfaces)):
         scored, fit = _polished(user, fit, cloud, surfaces, reference.mesh.faces, tol, spacing, diag)
     prog("placed", 1.0)
@@ -90,13 +90,15 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
 
 
 def _worth_compiling(user: Mesh, surfaces: dict[int, Surface]) -> bool:
-    """True when placing `user` evaluates B-spline or Bézier faces often enough to pay numba's start-up: every corner
-    of the STL projected POLISH_ROUNDS + 1 times is COMPILED_MIN_POINTS, or the part has FREE_FORM_FACES such faces
-    (each projected in its own calls, a few Newton steps each, every one a numpy call of ~0.1 ms however few its
-    points: as1's 70 B-spline faces, its 2,308-triangle STL, 4.7 → 3.1 s with the start-up; 45 faces break even)."""
+    """True when placing `user` projects onto faces often enough to pay numba's start-up (the compiled evaluator, and
+    the projection's loop in one call per face, _projection_kernel.py): every corner of the STL projected
+    POLISH_ROUNDS + 1 times is COMPILED_MIN_POINTS, or the part has FREE_FORM_FACES B-spline or Bézier faces (each
+    projected in its own calls, a few Newton steps each, every one a numpy call of ~0.1 ms however few its points:
+    as1's 70 B-spline faces, its 2,308-triangle STL, 4.7 → 3.1 s with the start-up; 45 faces break even)."""
     free_form = sum(s.surface_type in ("bspline", "bezier") and s.data is not None for s in surfaces.values())
-    return free_form > 0 and (3 * user.n_triangles * (POLISH_ROUNDS + 1) >= COMPILED_MIN_POINTS
-                              or free_form >= FREE_FORM_FACES)
+    compiled_kinds = free_form + sum(s.closed_form is not None for s in surfaces.values())
+    return compiled_kinds > 0 and (3 * user.n_triangles * (POLISH_ROUNDS + 1) >= COMPILED_MIN_POINTS
+                                   or free_form >= FREE_FORM_FACES)
 
 
 def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], faces: tuple, tol: float,

@@ -29,6 +29,26 @@ class ReferenceCloud:
         """The k-d tree of the points, built once for the alignment and every isolate round."""
         return cKDTree(self.points)
 
+    @cached_property
+    def _by_face(self) -> dict[int, np.ndarray]:
+        """Each face id's sample indices (ascending), from one stable sort of the samples' faces."""
+        order = np.argsort(self.face, kind="stable")
+        faces, first = np.unique(self.face[order], return_index=True)
+        return {int(f): own for f, own in zip(faces, np.split(order, first[1:]), strict=True)}
+
+    @cached_property
+    def _face_trees(self) -> dict[int, tuple[np.ndarray, cKDTree | None]]:
+        """face_tree's results so far."""
+        return {}
+
+    def face_tree(self, fid: int) -> tuple[np.ndarray, cKDTree | None]:
+        """((s,) indices of face fid's samples, the k-d tree of their points), made once per face (every isolate
+        round and candidate asks again); no samples: an empty index and None."""
+        if fid not in self._face_trees:
+            own = self._by_face.get(fid, np.zeros(0, np.int64))
+            self._face_trees[fid] = (own, cKDTree(self.points[own]) if len(own) else None)
+        return self._face_trees[fid]
+
     @classmethod
     def of(cls, mesh: Mesh, spacing: float, max_points: int = 4_000_000, error: float = np.inf) -> ReferenceCloud:
         """Points on every triangle of a tessellation that carries (u,v), no surface point farther than about
@@ -121,8 +141,7 @@ RESTARTS = 3
 
 
 def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, surfaces: dict[int, Surface],
-                   trees: dict[int, tuple[np.ndarray, cKDTree]], tolerance: float = np.inf,
-                   restarts: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                   tolerance: float = np.inf, restarts: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """((m, k, 2) uv, (m, k) distance) of each triangle's k points (m, k, 3) (its corners, then its centroid)
     projected on the surface of its given face, the periodic parameters unwrapped together (unwrap_corners); a
     triangle with a corner farther than `tolerance` + the cloud's slack from every sample of the face cannot be within
@@ -134,10 +153,9 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
         surf = surfaces.get(int(fid))
         if surf is None or fid < 0:
             continue
-        if fid not in trees:
-            own = np.flatnonzero(cloud.face == fid)
-            trees[int(fid)] = (own, cKDTree(cloud.points[own]))
-        own, tree = trees[int(fid)]
+        own, tree = cloud.face_tree(int(fid))
+        if tree is None:
+            continue
         tris = np.flatnonzero(face == fid)
         apart, near = tree.query(points[tris].reshape(-1, 3))  # start each point at the nearest sample of the face
         reachable = (apart.reshape(-1, k)[:, :3] <= tolerance + cloud.slack).all(axis=1)
@@ -213,7 +231,6 @@ def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], fac
     rank = np.full((m, 2), np.inf)  # of the chosen face: (0 through the corners else 1, centroid's distance or stray)
     longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     enough = ON_SURFACE * 2 * triangle_areas(corners) / np.maximum(longest, 1e-300)  # × its smallest height
-    trees: dict[int, tuple[np.ndarray, cKDTree]] = {}
     todo = np.arange(m)
     tried = np.full((m, 1), -2, np.int64)
     for _ in range(candidates):
@@ -229,7 +246,7 @@ def isolate(mesh: Mesh, cloud: ReferenceCloud, surfaces: dict[int, Surface], fac
         pick = nf[has][np.arange(len(todo)), np.argmax(fresh[has], axis=1)]
         tried = np.concatenate([tried, np.full((m, 1), -2, np.int64)], axis=1)
         tried[todo, -1] = pick
-        p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, trees, tolerance, restarts)
+        p_uv, d = _project_faces(points[todo], pick, cloud, surfaces, tolerance, restarts)
         through = d[:, :3].max(axis=1) <= snap
         new = np.stack([np.where(through, 0.0, 1.0), np.where(through, d[:, 3], d.max(axis=1))], axis=1)
         old = rank[todo]
