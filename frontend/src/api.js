@@ -6,6 +6,9 @@ const KEY = 'amprep.apiKey';
 export function apiKey() { return sessionStorage.getItem(KEY) || ''; }
 export function setApiKey(k) { if (k) sessionStorage.setItem(KEY, k); else sessionStorage.removeItem(KEY); }
 
+/** The statuses a job never leaves. */
+export const ENDED = ['succeeded', 'failed', 'cancelled'];
+
 export class ApiError extends Error {
   constructor(status, code, detail) { super(detail || code); this.status = status; this.code = code; }
 }

@@ -1,6 +1,6 @@
 // The dashboard (/): drop files, choose the job kind and its parameters, submit; the jobs list, live by SSE.
 
-import { ApiError, call, el, events, fmtSeconds, jobSeconds, json, keyBar, plain } from './api.js';
+import { ApiError, ENDED, call, el, events, fmtSeconds, jobSeconds, json, keyBar, plain } from './api.js';
 import { paramsForm } from './form.js';
 
 const $ = (s) => document.querySelector(s);
@@ -67,7 +67,6 @@ function dropZone() {
 }
 
 // ---- the jobs list --------------------------------------------------------------------------------------
-const ENDED = ['succeeded', 'failed', 'cancelled'];
 const STATUS_WORDS = { queued: 'queued', running: 'running', succeeded: 'succeeded', failed: 'failed', cancelled: 'cancelled' };
 
 function matches(job) {

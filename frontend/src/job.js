@@ -1,7 +1,7 @@
 // The job page (/jobs/{id}): status (live), the 3D view with error colouring, defects and picking, before/after for
 // refine jobs, downloads, the report's tables and plots.
 
-import { ApiError, bytes, call, download, el, events, fmtBytes, fmtNumber, fmtSeconds, jobSeconds, json, keyBar, plain } from './api.js';
+import { ApiError, ENDED, bytes, call, download, el, events, fmtBytes, fmtNumber, fmtSeconds, jobSeconds, json, keyBar, plain } from './api.js';
 import { cssRamp, range } from './colours.js';
 import { defectItems, merged } from './defects.js';
 import { parseSTL } from './stl.js';
@@ -235,7 +235,7 @@ async function start() {
     return;
   }
   header(page.job);
-  if (['succeeded', 'failed', 'cancelled'].includes(page.job.status)) { await ended(page.job); return; }
+  if (ENDED.includes(page.job.status)) { await ended(page.job); return; }
   for await (const m of events(`/v1/jobs/${jobId}/events`)) {
     if (m.event !== 'job') continue;
     page.job = JSON.parse(m.data);
