@@ -165,6 +165,9 @@ def project_settled(surface: Surface, points: np.ndarray, uv0: np.ndarray, itera
     return uv, np.linalg.norm(surface.evaluate(uv) - points, axis=1), last < settle
 
 
+_projection = None  # the _projection_kernel module once loaded
+
+
 def _compiled_projection(surface: Surface, points: int) -> Callable[..., None] | None:
     """The compiled form of project_settled's loop for a closed-form or B-spline surface (_projection_kernel.py), where
     core.compiled.use_compiled says (the computation's choice, else a call of ≥ COMPILED_MIN_POINTS points); None:
@@ -173,12 +176,15 @@ def _compiled_projection(surface: Surface, points: int) -> Callable[..., None] |
     d = surface.data if surface.surface_type in ("bspline", "bezier") else None
     if (kind is None and d is None) or not use_compiled(points, COMPILED_MIN_POINTS):
         return None
-    fork_safe_threads()
-    from amprep.geometry.cad import _projection_kernel as compiled_kernel
+    global _projection
+    if _projection is None:  # imported once: a placement asks for it in thousands of calls of a few points
+        fork_safe_threads()
+        from amprep.geometry.cad import _projection_kernel
 
+        _projection = _projection_kernel
     if kind is not None:
-        return partial(compiled_kernel.project_closed_form, kind[0], kind[1])
-    return partial(compiled_kernel.project_bspline, *kernel_arguments(d))
+        return partial(_projection.project_closed_form, kind[0], kind[1])
+    return partial(_projection.project_bspline, *kernel_arguments(d))
 
 
 def plane(o: np.ndarray, x: np.ndarray, y: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
