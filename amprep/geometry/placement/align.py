@@ -9,6 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from amprep.errors import AmprepError, ErrorCode
+from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import cross
 
 
@@ -107,6 +108,7 @@ def _icp(tree: cKDTree, cad_points: np.ndarray, pts: np.ndarray, R: np.ndarray, 
     """Trimmed ICP of (n, 3) points onto the cloud from (R, t): matches within max(3 × the median nearest distance of
     the first SCORE_POINTS, inlier_distance), each query bounded; stops when a round moves by < 1e-12."""
     for _ in range(rounds):
+        checkpoint()
         moved = pts @ R.T + t
         near, first = tree.query(moved[:SCORE_POINTS], distance_upper_bound=reach, workers=-1)
         trim = max(3 * float(np.median(np.minimum(near, reach))), inlier_distance)
@@ -160,6 +162,7 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
     reach = 0.1 * float(np.linalg.norm(np.ptp(cad_points, axis=0))) + inlier_distance
     scored = []
     for name, R, t in starts:
+        checkpoint()
         d, _ = tree.query(probe[:SCORE_POINTS] @ R.T + t, distance_upper_bound=reach)
         scored.append((float(np.median(np.minimum(d, reach))), name, R, t))
     scored.sort(key=lambda s: s[0])
@@ -168,6 +171,7 @@ def align(stl_points: np.ndarray, cad_points: np.ndarray, inlier_distance: float
         # coarse to fine: ICP on the scoring points until it settles, then a few rounds on the whole sample
         for cloud, rounds in ((pts[:SCORE_POINTS], iterations), (pts, FINE_ROUNDS)):
             R, t = _icp(tree, cad_points, cloud, R, t, reach, inlier_distance, rounds)
+        checkpoint()
         d, _ = tree.query(stl_points @ R.T + t, distance_upper_bound=inlier_distance * (1 + 1e-12), workers=-1)
         inl = np.isfinite(d)
         fit = Alignment(R, t, float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf"),

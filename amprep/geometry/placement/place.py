@@ -84,7 +84,8 @@ def place_user_stl(model: CadModel, user: Mesh, mesh_params: MeshParams, prog: P
     # each round projects every corner on its candidate faces, a few points per call: by the compiled kernels where
     # _worth_compiling says (decided by the input, not by what is loaded)
     with compiled(_worth_compiling(user, surfaces)):
-        scored, fit = _polished(user, fit, cloud, surfaces, reference.mesh.faces, tol, spacing, diag)
+        scored, fit = _polished(user, fit, cloud, surfaces, reference.mesh.faces, tol, spacing, diag,
+                                prog.span(0.8, 1.0))
     prog("placed", 1.0)
     return PlacedStl(scored, fit, tol, surfaces, reference.mesh.faces)
 
@@ -102,10 +103,10 @@ def _worth_compiling(user: Mesh, surfaces: dict[int, Surface]) -> bool:
 
 
 def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], faces: tuple, tol: float,
-              spacing: float, diag: float) -> tuple[Mesh, Any]:
+              spacing: float, diag: float, prog: Progress) -> tuple[Mesh, Any]:
     """(the STL placed: each triangle its face within `tol`, (u,v), free corners centred; the fit polished against
     the exact surfaces): corners matched within the coarse fit's reach pulled onto their faces' tangent planes, round
-    by round, until a round moves none by more than SETTLED × the diagonal."""
+    by round, until a round moves none by more than SETTLED × the diagonal; `prog` told of each round."""
     from dataclasses import replace
 
     from amprep.geometry.cad.surfaces import surface_normals
@@ -116,7 +117,8 @@ def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], fa
     # its corners, on the surface (a 0.5 mm STL of a 12 mm cone: 0.07 mm off, no corner within tol)
     reach = tol + spacing + 3 * fit.rms
     snap = max(SNAP * diag, 8 * float(np.spacing(np.float32(np.abs(user.vertices).max()))))
-    for _ in range(POLISH_ROUNDS):  # polish the fit against the exact surfaces: matched corners onto their planes
+    for step in range(POLISH_ROUNDS):  # polish the fit against the exact surfaces: matched corners onto their planes
+        prog("isolating faces", step / (POLISH_ROUNDS + 1))
         placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
         scored, dist = isolate(placed, cloud, surfaces, faces, reach, snap)
         ok = scored.face_ids >= 0
@@ -142,6 +144,7 @@ def _polished(user: Mesh, fit: Any, cloud: Any, surfaces: dict[int, Surface], fa
         turn = 3 * np.abs(dR - np.eye(3)).max() * float(np.abs(placed.vertices).max())  # bounds |(dR − I)·x|
         if turn + np.linalg.norm(dt) <= SETTLED * diag:
             break  # no corner moved by more than that: the rounds after it move them by rounding noise
+    prog("isolating faces", POLISH_ROUNDS / (POLISH_ROUNDS + 1))
     placed = Mesh.from_arrays(fit.apply(user.vertices), user.triangles)
     scored, dist = isolate(placed, cloud, surfaces, faces, tol, snap, restarts=RESTARTS)
     # a pole's free parameter, wherever its projection left it, would fold its triangles' (u,v)

@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 from amprep.geometry.cad.surfaces import Surface, project_settled
 from amprep.geometry.core.checks import triangle_areas
 from amprep.geometry.core.mesh import FaceInfo, Mesh
+from amprep.geometry.core.progress import checkpoint
 
 
 @dataclass(frozen=True)
@@ -119,6 +120,7 @@ def with_free_corners_centred(mesh: Mesh, surfaces: dict[int, Surface], snap: fl
         return mesh
     uv = mesh.uv.copy()
     for fid in np.unique(mesh.face_ids[mesh.face_ids >= 0]):
+        checkpoint()
         t = np.flatnonzero(mesh.face_ids == fid)
         surf = surfaces[int(fid)]
         here = surf.evaluate(uv[t].reshape(-1, 2)).reshape(-1, 3, 3)
@@ -150,6 +152,7 @@ def _project_faces(points: np.ndarray, face: np.ndarray, cloud: ReferenceCloud, 
     uv = np.zeros((m, k, 2))
     dist = np.full((m, k), np.inf)
     for fid in np.unique(face):
+        checkpoint()  # a face's projections cost a few ms; a million-triangle STL has a cancel seen between them
         surf = surfaces.get(int(fid))
         if surf is None or fid < 0:
             continue
@@ -188,6 +191,10 @@ def _from_samples(surf: Surface, pts: np.ndarray, near: np.ndarray, own: np.ndar
     return uv, dist
 
 
+#: points per k-d tree query of nearest_faces (a cancel is looked for between queries)
+QUERY_BLOCK = 200_000
+
+
 def nearest_faces(cloud: ReferenceCloud, corners: np.ndarray, k: int) -> np.ndarray:
     """(m, 4·⌈k/4⌉) faces of the cloud's samples nearest each triangle's centroid and edge midpoints ((m, 3, 3)
     corners), ⌈k/4⌉ for each point, nearest first: a long strip's centroid lies by the face it borders, whose samples
@@ -195,7 +202,12 @@ def nearest_faces(cloud: ReferenceCloud, corners: np.ndarray, k: int) -> np.ndar
     mids = 0.5 * (corners + np.roll(corners, -1, axis=1))
     points = np.concatenate([corners.mean(axis=1, keepdims=True), mids], axis=1)  # (m, 4, 3)
     each = -(-k // points.shape[1])
-    dist, near = cloud.tree.query(points.reshape(-1, 3), k=each)
+    flat = points.reshape(-1, 3)
+    dist, near = np.empty((len(flat), each)), np.empty((len(flat), each), np.int64)
+    for s in range(0, len(flat), QUERY_BLOCK):  # bounded calls: a cancel or time limit seen between them
+        checkpoint()
+        d, i = cloud.tree.query(flat[s:s + QUERY_BLOCK], k=each)
+        dist[s:s + QUERY_BLOCK], near[s:s + QUERY_BLOCK] = d.reshape(len(d), each), i.reshape(len(i), each)
     dist, near = dist.reshape(len(corners), -1), near.reshape(len(corners), -1)
     order = np.argsort(dist, axis=1, kind="stable")
     return cloud.face[np.take_along_axis(near, order, axis=1)]
