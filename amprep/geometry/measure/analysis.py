@@ -14,7 +14,7 @@ from amprep.geometry.core.checks import check_mesh, float32_joined, manifold3d_a
 from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.edges import edge_incidence
 from amprep.geometry.core.mesh import Mesh
-from amprep.geometry.core.progress import Progress, ProgressFn
+from amprep.geometry.core.progress import Progress, ProgressFn, checkpoint
 from amprep.geometry.measure import cusp
 from amprep.geometry.measure.chordal import barycentric_grid, triangle_chordal_error, worth_compiling
 from amprep.geometry.measure.cylindricity import minimum_zone
@@ -100,6 +100,7 @@ def face_chordal_errors(mesh: Mesh, surfaces: dict[int, Surface], order: int) ->
     by_face = np.argsort(mesh.face_ids, kind="stable")
     bounds = np.searchsorted(mesh.face_ids[by_face], np.arange(max(surfaces) + 2))
     for fid, surf in surfaces.items():
+        checkpoint()
         tris = by_face[bounds[fid]:bounds[fid + 1]]
         if len(tris) == 0:
             continue
@@ -129,6 +130,7 @@ def faces_section(mesh: Mesh, chordal: np.ndarray, surfaces: dict[int, Surface],
     bounds = np.searchsorted(mesh.face_ids[order], np.arange(n_faces + 1))
     out = []
     for fid in range(n_faces):
+        checkpoint()
         tris = order[bounds[fid]:bounds[fid + 1]]
         stype = mesh.faces[fid].surface_type if fid < len(mesh.faces) else "none"
         w = (area[tris] * counted[tris])

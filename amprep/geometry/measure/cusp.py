@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from amprep.geometry.core import vectors
-from amprep.geometry.core.progress import ProgressFn
+from amprep.geometry.core.progress import ProgressFn, checkpoint
 
 HORIZONTAL_COS = 1.0 - 1e-9  # |n̂·b̂| above this: a horizontal facet, printed flat, no stair step
 
@@ -183,6 +183,7 @@ def bounding_box(corners: np.ndarray, layer: float, build_dir: np.ndarray, densi
     height = np.full(2 * ns, -np.inf)
     sorted_pts, sorted_normals = np.ascontiguousarray(pts[order]), np.ascontiguousarray(normals[order])
     for s in range(0, ns, SEGMENTS_PER_CALL):  # in blocks, so that a cancel or a time limit is seen between them
+        checkpoint()
         sl = slice(s, min(s + SEGMENTS_PER_CALL, ns))
         h = np.full(2 * (sl.stop - s), -np.inf)
         box_cusp_kernel(seg.slice_index[sl], seg.p1[sl], e[sl], side[sl], length[sl], b,

@@ -18,6 +18,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface, nearest_copy, project_points, tangents
 from amprep.geometry.core.edges import face_edge_table
 from amprep.geometry.core.mesh import IN_FACE, Mesh
+from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import cross, norms, triangle_normals
 
 # Local labels of a section's points.
@@ -204,6 +205,7 @@ def _projected(target: np.ndarray, uv0: np.ndarray, fid: np.ndarray, surfaces: d
     """(k, p, 2) (u,v) of the surface points nearest target (k, p, 3), row i on face fid[i], from uv0 (k, p, 2)."""
     out = uv0.copy()
     for f in np.unique(fid):
+        checkpoint()
         k = fid == f
         out[k] = project_points(surfaces[int(f)], target[k].reshape(-1, 3), uv0[k].reshape(-1, 2))[0].reshape(
             uv0[k].shape)
@@ -299,6 +301,7 @@ def _labels(s: _Sections, ids: _Numbering, new_uv: np.ndarray,
     mask = ~s.contour
     own_e1, own_e2 = s.own1.copy(), s.own2.copy()
     for f in np.unique(s.fid):
+        checkpoint()
         rows, cols = np.nonzero(mask & (s.fid[:, None] == f))
         per = surfaces[int(f)].periods
         own_e1[rows, cols] = nearest_copy(new_uv[ids.ve1[rows, cols] - ids.n0], s.own1[rows, cols], per)

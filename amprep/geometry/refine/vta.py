@@ -9,6 +9,7 @@ import numpy as np
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.core.mesh import IN_FACE, Mesh
+from amprep.geometry.core.progress import checkpoint
 from amprep.geometry.core.vectors import unit_normals
 from amprep.geometry.measure.chordal import barycentric_grid
 from amprep.geometry.refine.sma import Refinement
@@ -48,6 +49,7 @@ def vta_refine(mesh: Mesh, faces: list[int] | np.ndarray, surfaces: dict[int, Su
         sel = np.flatnonzero(np.isin(fids, faces))
         new_uv, new_xyz, chosen = [], [], []
         for f in np.unique(fids[sel]):
+            checkpoint()
             t = sel[fids[sel] == f]
             p_uv, p_xyz, err = _worst_points(verts[tris[t]], uvs[t], surfaces[int(f)], w)
             keep = err > (threshold if threshold is not None else 0.0)
