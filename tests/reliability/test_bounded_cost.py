@@ -312,3 +312,22 @@ def test_refinement_and_its_comparison_look_for_a_cancel_between_faces(monkeypat
         refine_file(corpus("featuretype_inch_ap214.step"), None, MeshParams(tolerance=0.1), params,
                     progress=lambda s, f: stages.append(s))
     assert e.value.code == ErrorCode.CANCELLED and stages[-1] == "refining"
+
+
+def test_the_reports_whole_mesh_checks_look_for_a_cancel_between_them():
+    """check_mesh, manifold3d, the edge incidence, boundary loops, non-manifold vertices, float32 joins and defect
+    locations are each one pass over the whole mesh (4.7 s together on a 772k-triangle Butterfly output, minutes on
+    tens of millions): a cancel is looked for between them, and one raised there ends the report in that stage."""
+    from amprep.geometry.core.progress import checking
+
+    stages: list[str] = []
+    checks: list[str] = []
+
+    def cancel() -> None:
+        checks.append(stages[-1] if stages else "")
+        if checks.count("checking the mesh") == 3:
+            raise AmprepError(ErrorCode.CANCELLED, "the job was cancelled")
+
+    with checking(cancel), pytest.raises(AmprepError) as e:
+        analyze_mesh(_soup(300), AnalysisParams(bounding_box=False), progress=lambda s, f: stages.append(s))
+    assert e.value.code == ErrorCode.CANCELLED and stages[-1] == "checking the mesh"

@@ -3,8 +3,9 @@ and cylindricity against the exact surfaces when the faces are known)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -147,6 +148,15 @@ def faces_section(mesh: Mesh, chordal: np.ndarray, surfaces: dict[int, Surface],
     return out
 
 
+T = TypeVar("T")
+
+
+def _checked(fn: Callable[..., T], *args: Any) -> T:
+    """fn(*args) after the job's cancel check (core.progress.checkpoint)."""
+    checkpoint()
+    return fn(*args)
+
+
 def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces: dict[int, Surface] | None = None,
                  n_faces: int = 0, input_info: dict[str, Any] | None = None, tolerance: float | None = None,
                  progress: ProgressFn | None = None) -> Analysis:
@@ -157,20 +167,20 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
     b = np.asarray(params.build_dir, float)
     b = b / np.linalg.norm(b)
     prog("checking the mesh", 0.0)
-    checks = check_mesh(mesh)
-    ok3d = manifold3d_accepts(mesh)
-    inc = edge_incidence(mesh.triangles)
-    loops = boundary_loops(mesh, inc)
-    nmv = nonmanifold_vertices(mesh, inc)
+    checks = _checked(check_mesh, mesh)  # whole-mesh passes of a second or more each on millions of triangles:
+    ok3d = _checked(manifold3d_accepts, mesh)  # a cancel is looked for between them
+    inc = _checked(edge_incidence, mesh.triangles)
+    loops = _checked(boundary_loops, mesh, inc)
+    nmv = _checked(nonmanifold_vertices, mesh, inc)
     prog("self-intersections", 0.15)
     n_si, si_examples, si_complete = self_intersections(mesh, params.intersection_examples,
                                                          prog.span(0.15, 0.35))
-    by_position = float32_joined(mesh, checks.nonmanifold_edges)
+    by_position = _checked(float32_joined, mesh, checks.nonmanifold_edges)
     section = replace(mesh_section(mesh, checks, ok3d).with_position(*by_position), defects={
         "boundary_loops": {"count": len(loops), "total_length": float(sum(loops)), "lengths": loops[:100]},
         "nonmanifold_vertices": int(len(nmv)),
         "self_intersections": {"count": n_si, "examples": si_examples.tolist(), "complete": si_complete},
-        "locations": defect_locations(mesh, inc, params.location_cap),
+        "locations": _checked(defect_locations, mesh, inc, params.location_cap, nmv),
     })
     prog("regularity", 0.35)
     q = regularity_at(mesh.vertices, mesh.triangles)

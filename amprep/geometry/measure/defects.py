@@ -56,9 +56,8 @@ def nonmanifold_vertices(mesh: Mesh, inc: EdgeIncidence | None = None) -> np.nda
     r, c = np.concatenate(rows), np.concatenate(cols)
     graph = coo_matrix((np.ones(len(r)), (r, c)), shape=(3 * m, 3 * m))
     _, labels = connected_components(graph, directed=False)
-    vert = t.reshape(-1)
-    pairs = np.unique(np.stack([vert, labels], axis=1), axis=0)
-    fans = np.bincount(pairs[:, 0], minlength=len(mesh.vertices))
+    fan = np.unique(t.reshape(-1).astype(np.int64) * (3 * m) + labels)  # (vertex, fan) pairs as one int64 key
+    fans = np.bincount(fan // (3 * m), minlength=len(mesh.vertices))
     return np.flatnonzero(fans > 1)
 
 
@@ -192,9 +191,10 @@ def self_intersections(mesh: Mesh, examples: int = 100, progress: ProgressFn | N
     return int(len(found)), found[:examples], complete
 
 
-def defect_locations(mesh: Mesh, inc: EdgeIncidence, cap: int = 1000) -> dict[str, dict]:  # type: ignore[type-arg]
+def defect_locations(mesh: Mesh, inc: EdgeIncidence, cap: int = 1000,
+                     nmv: np.ndarray | None = None) -> dict[str, dict]:  # type: ignore[type-arg]
     """Up to `cap` locations per defect kind: edges as vertex pairs with coordinates, triangles as indices with
-    corners, vertices with coordinates (for the viewer to draw)."""
+    corners, vertices with coordinates (for the viewer to draw); `nmv` the non-manifold vertices when known."""
     v = mesh.vertices
 
     def edges(mask: np.ndarray) -> dict:  # type: ignore[type-arg]
@@ -206,10 +206,11 @@ def defect_locations(mesh: Mesh, inc: EdgeIncidence, cap: int = 1000) -> dict[st
         return {"count": int(len(index)), "triangles": i.tolist(), "coordinates": v[mesh.triangles[i]].round(6).tolist()}
 
     srt = np.sort(mesh.triangles, axis=1)
-    _, first, counts = np.unique(srt, axis=0, return_index=True, return_counts=True)
-    dup_mask = np.ones(len(srt), bool)
-    dup_mask[first] = False  # every copy after the first
-    nmv = nonmanifold_vertices(mesh, inc)
+    order = np.lexsort(srt.T[::-1])  # stable: each group of copies in index order
+    copy = (srt[order[1:]] == srt[order[:-1]]).all(axis=1)
+    dup_mask = np.zeros(len(srt), bool)
+    dup_mask[order[1:][copy]] = True  # every copy after the first
+    nmv = nonmanifold_vertices(mesh, inc) if nmv is None else nmv
     return {
         "boundary_edges": edges(inc.count == 1),
         "nonmanifold_edges": edges(inc.count > 2),
