@@ -180,7 +180,7 @@ def analyze_mesh(mesh: Mesh, params: AnalysisParams = AnalysisParams(), surfaces
         "boundary_loops": {"count": len(loops), "total_length": float(sum(loops)), "lengths": loops[:100]},
         "nonmanifold_vertices": int(len(nmv)),
         "self_intersections": {"count": n_si, "examples": si_examples.tolist(), "complete": si_complete},
-        "locations": _checked(defect_locations, mesh, inc, params.location_cap, nmv),
+        "locations": _checked(defect_locations, mesh, inc, nmv, params.location_cap),
     })
     prog("regularity", 0.35)
     q = regularity_at(mesh.vertices, mesh.triangles)

@@ -191,10 +191,11 @@ def self_intersections(mesh: Mesh, examples: int = 100, progress: ProgressFn | N
     return int(len(found)), found[:examples], complete
 
 
-def defect_locations(mesh: Mesh, inc: EdgeIncidence, cap: int = 1000,
-                     nmv: np.ndarray | None = None) -> dict[str, dict]:  # type: ignore[type-arg]
+def defect_locations(mesh: Mesh, inc: EdgeIncidence, nmv: np.ndarray,
+                     cap: int = 1000) -> dict[str, dict]:  # type: ignore[type-arg]
     """Up to `cap` locations per defect kind: edges as vertex pairs with coordinates, triangles as indices with
-    corners, vertices with coordinates (for the viewer to draw); `nmv` the non-manifold vertices when known."""
+    corners, vertices with coordinates (for the viewer to draw); `nmv` the non-manifold vertices
+    (nonmanifold_vertices)."""
     v = mesh.vertices
 
     def edges(mask: np.ndarray) -> dict:  # type: ignore[type-arg]
@@ -210,7 +211,6 @@ def defect_locations(mesh: Mesh, inc: EdgeIncidence, cap: int = 1000,
     copy = (srt[order[1:]] == srt[order[:-1]]).all(axis=1)
     dup_mask = np.zeros(len(srt), bool)
     dup_mask[order[1:][copy]] = True  # every copy after the first
-    nmv = nonmanifold_vertices(mesh, inc) if nmv is None else nmv
     return {
         "boundary_edges": edges(inc.count == 1),
         "nonmanifold_edges": edges(inc.count > 2),

@@ -112,7 +112,7 @@ def _icp(tree: cKDTree, cad_points: np.ndarray, pts: np.ndarray, R: np.ndarray, 
         moved = pts @ R.T + t
         near, first = tree.query(moved[:SCORE_POINTS], distance_upper_bound=reach, workers=-1)
         trim = max(3 * float(np.median(np.minimum(near, reach))), inlier_distance)
-        if len(moved) <= SCORE_POINTS:  # the nearest within reach ≥ trim are those within trim (a query costs the same)
+        if len(moved) <= SCORE_POINTS:  # the nearest within reach ≥ trim are those within trim: no second query
             d, idx = np.where(near < trim, near, np.inf), first
         else:
             d, idx = tree.query(moved, distance_upper_bound=trim, workers=-1)
