@@ -33,8 +33,32 @@ def test_binary_header_never_starts_with_solid(torus_mesh):
 
 @pytest.mark.parametrize("name", STL_FILES)
 def test_corpus_stl_reads(name):
+    """Vertices are the file's distinct coordinate triples, in sorted order, as np.unique(axis=0) finds them."""
     m = read_stl(corpus(name))
     assert m.n_triangles > 0 and np.isfinite(m.vertices).all()
+    raw = corpus(name).read_bytes()
+    if 84 + 50 * int(np.frombuffer(raw, "<u4", 1, 80)[0]) == len(raw):
+        corners = np.frombuffer(raw, np.dtype([("n", "<f4", 3), ("c", "<f4", (3, 3)), ("a", "<u2")]), offset=84)["c"]
+        verts, inverse = np.unique(corners.reshape(-1, 3).astype(np.float64), axis=0, return_inverse=True)
+        np.testing.assert_array_equal(m.vertices, verts)
+        np.testing.assert_array_equal(m.triangles, inverse.reshape(-1, 3))
+
+
+def test_stl_vertices_join_identical_coordinates_only(tmp_path):
+    """Two facets share a vertex only where their coordinates are equal (−0.0 equals 0.0), never by distance: a
+    corner one float32 step away stays its own vertex."""
+    step = float(np.nextafter(np.float32(1), np.float32(2)))
+    corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[-0.0, 0, 0], [0, 1, 0], [0, 0, 1]],
+                        [[step, 0, 0], [0, 0, 1], [0, 1, 0]]], float)
+    p = tmp_path / "s.stl"
+    p.write_bytes(b"\0" * 80 + np.uint32(3).tobytes() + np.array(
+        [(np.zeros(3), c, 0) for c in corners],
+        dtype=np.dtype([("n", "<f4", 3), ("c", "<f4", (3, 3)), ("a", "<u2")])).tobytes())
+    m = read_stl(p)
+    assert m.n_vertices == 5
+    t = m.triangles
+    assert t[0, 0] == t[1, 0] and t[2, 0] not in (t[0, 1], t[0, 0])
+    np.testing.assert_array_equal(m.vertices[t], corners)
 
 
 def test_corpus_stl_defects_are_counted():

@@ -9,7 +9,7 @@ import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.core.mesh import Mesh
-from amprep.geometry.core.vectors import unit_normals
+from amprep.geometry.core.vectors import group_rows, unit_normals
 
 _BINARY = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
 
@@ -58,9 +58,9 @@ def write_stl(mesh: Mesh, path: str | Path, ascii: bool = False, header: str = "
 
 def _index(corners: np.ndarray) -> Mesh:
     """Indexed mesh from (m, 3, 3) corners: vertices are identical coordinate triples (an STL's only topology)."""
-    flat = np.ascontiguousarray(corners.reshape(-1, 3))
-    verts, inverse = np.unique(flat, axis=0, return_inverse=True)
-    return Mesh.from_arrays(verts.astype(np.float64), inverse.reshape(-1, 3))
+    flat = np.ascontiguousarray(corners.reshape(-1, 3), dtype=np.float64)
+    group, first = group_rows(flat)
+    return Mesh.from_arrays(flat[first], group.reshape(-1, 3))
 
 
 def read_stl(path: str | Path) -> Mesh:

@@ -20,7 +20,7 @@ from amprep.geometry.cad.surfaces import Surface, project_points, surface_normal
 from amprep.geometry.core.checks import degenerate_mask, shell_labels, signed_volume, triangle_areas
 from amprep.geometry.core.edges import distinct_corners, edge_codes, edge_incidence
 from amprep.geometry.core.mesh import IN_FACE, ON_BREP_EDGE, ON_BREP_VERTEX, FaceInfo, Mesh
-from amprep.geometry.core.vectors import cross
+from amprep.geometry.core.vectors import cross, group_rows
 from amprep.geometry.meshing.occt_read import FacePatch
 
 #: a key's nodes are seated anew when one lies farther than this × the tolerance from their mean
@@ -79,7 +79,7 @@ def seat_boundaries(patches: list[FacePatch | None], surfaces: list[Surface | No
         return moved_nodes
     keys = [node_keys(patches[i], b, vertex_roots) for i, b in zip(idx, on, strict=True)]  # type: ignore[arg-type]
     nodes = np.concatenate([patches[i].nodes[b] for i, b in zip(idx, on, strict=True)])  # type: ignore[union-attr]
-    group, first = _groups(np.concatenate(keys))
+    group, first = group_rows(np.concatenate(keys))
     mean = _group_mean(group, nodes)
     off = np.linalg.norm(mean[group] - nodes, axis=1)
     reach = np.zeros(len(mean))
@@ -191,18 +191,6 @@ def _max_by(keys: np.ndarray, values: np.ndarray) -> tuple[list[int], list[float
     order = np.lexsort((values, keys))
     last = np.r_[keys[order][1:] != keys[order][:-1], True]
     return keys[order][last].tolist(), values[order][last].tolist()
-
-
-def _groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """((n,) group id of each key row (n, 3) int64, equal rows one id, ids in sorted order of the rows; (g,) the first
-    row of each group): a stable lexsort, which sorts int64 columns where np.unique(axis=0) sorts bytes, slower."""
-    order = np.lexsort(rows.T[::-1])
-    s = rows[order]
-    new = np.ones(len(s), bool)
-    new[1:] = (s[1:] != s[:-1]).any(axis=1)
-    group = np.empty(len(rows), np.int64)
-    group[order] = np.cumsum(new) - 1
-    return group, order[new]
 
 
 def weld(patches: list[FacePatch], faces: tuple[FaceInfo, ...], vertex_roots: np.ndarray | None = None) -> Mesh:
