@@ -165,6 +165,8 @@ def cmd_refine(args: argparse.Namespace) -> int:
         rep = r.report
         b, a = rep["mesh_before"], rep["mesh"]
         state = "closed" if a["watertight"] else "open"
+        if a["watertight"] and not a.get("closed_by_position", True) and out.suffix.lower() == ".stl":
+            state = f"closed by index, {a['nonmanifold_edges_by_position']} non-manifold edges once joined by position"
         bf = rep.get("butterfly")
         how = (f"{len(rep['refined_faces'])} face(s) refined by {rep['method'].upper()}" if bf is None else
                f"re-meshed to edges ≤ {bf['max_edge']:g} mm on the Butterfly limit surface (longest "

@@ -141,9 +141,9 @@ def convert(path: str | Path, params: MeshParams = MeshParams(), progress: Progr
     except AmprepError:  # the child died: check here
         checks, rounded, (joined, by_position) = output_checks(mesh)
     if by_position > checks.nonmanifold_edges:
-        notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch): a "
-                     f"reader that joins an STL's vertices by position sees {by_position} non-manifold edges (a 3MF "
-                     "keeps each solid its own object)")
+        notes.append(f"{joined} vertices share their float32 position with another vertex (solids that touch, or "
+                     f"slivers the rounding collapses): a reader that joins an STL's vertices by position sees "
+                     f"{by_position} non-manifold edges (a 3MF keeps each solid its own object)")
     if rounded:
         notes.append(f"{rounded} triangle(s) become degenerate when rounded to the float32 coordinates STL and 3MF "
                      "store (a part far from the origin at a micron tolerance)")

@@ -100,6 +100,42 @@ def test_solids_that_touch_are_apart_by_index_and_joined_in_the_file():
     assert float32_joined(apart) == (0, 0)
 
 
+def test_slivers_the_float32_rounding_collapses_are_counted_as_the_file_read_back_has_them(tmp_path):
+    """A box at 100 mm whose bottom edge is split 1e-7 mm from a corner (under float32's step there): closed by index;
+    in the file the split point is the corner, and each of the two slivers beside it runs along one side twice. The
+    count by position is what the written STL holds, counted in plain Python, and what check_mesh reads back."""
+    from amprep.geometry.core.checks import check_mesh, closed_by_position, float32_joined
+    from amprep.geometry.core.mesh import Mesh
+    from amprep.geometry.io.stl import read_stl, write_stl
+
+    v, t = _box((100, 100, 100), (101, 101, 101))
+    split = np.vstack([v, v[0] + [1e-7, 0, 0]])  # on the edge v0–v1, a vertex of its own
+    rows = []
+    for tri in t.tolist():
+        k = next((k for k in range(3) if {tri[k], tri[(k + 1) % 3]} == {0, 1}), None)
+        if k is None:
+            rows.append(tri)
+            continue
+        x, y, c = tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]  # side x → y on edge 0–1: cut at vertex 8
+        rows += [[x, 8, c], [8, y, c]]
+    mesh = Mesh.from_arrays(split, np.array(rows))
+    checks = check_mesh(mesh)
+    assert checks.closed and checks.degenerate_triangles == 0
+    joined, by_position = float32_joined(mesh, checks.nonmanifold_edges)
+    write_stl(mesh, tmp_path / "s.stl")
+    corners = np.frombuffer((tmp_path / "s.stl").read_bytes()[84:],
+                            np.dtype([("n", "<f4", 3), ("c", "<f4", (3, 3)), ("a", "<u2")]))["c"]
+    sides: dict = {}
+    for tri in corners:
+        keys = [tuple(p) for p in tri.tolist()]
+        for k in range(3):
+            side = frozenset((keys[k], keys[(k + 1) % 3]))
+            sides[side] = sides.get(side, 0) + 1
+    assert joined == 1 and by_position == sum(n > 2 for n in sides.values()) == 2
+    assert check_mesh(read_stl(tmp_path / "s.stl")).nonmanifold_edges == by_position
+    assert not closed_by_position(checks, by_position)
+
+
 
 def test_convert_notes_what_a_reader_joining_by_position_sees(tmp_path, touching_step):
     """Two boxes of one STEP face to face: meshed apart (closed by index, each its own B-rep edges), their shared

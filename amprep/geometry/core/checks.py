@@ -8,7 +8,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from amprep.geometry.core.edges import EdgeIncidence, distinct_corners, edge_incidence
+from amprep.geometry.core.edges import EdgeIncidence, edge_incidence
 from amprep.geometry.core.mesh import Mesh
 from amprep.geometry.core.vectors import cross, norms, triangle_normals
 
@@ -75,7 +75,9 @@ def float32_joined(mesh: Mesh, nonmanifold: int = 0) -> tuple[int, int]:
     with another vertex, less the positions they take, and the edges used by more than two triangles once vertices are
     joined by that position, as a reader that welds a file by position sees them ((0, `nonmanifold`, the mesh's own
     count) when no two vertices share one). The mesh's own checks go by index: two solids that touch stay apart
-    there, not in the file."""
+    there, not in the file. A triangle whose corners the rounding joins stays in the count, as check_mesh counts the
+    file read back: one with two corners at one position runs along its third side twice, both ways (a sliver whose
+    short side is under float32's step; a reader that drops degenerate facets finds its neighbours closed)."""
     if mesh.n_triangles == 0:
         return 0, nonmanifold
     key = np.ascontiguousarray(mesh.vertices.astype(np.float32)).view(np.dtype((np.void, 12))).ravel()
@@ -83,9 +85,7 @@ def float32_joined(mesh: Mesh, nonmanifold: int = 0) -> tuple[int, int]:
     joined = mesh.n_vertices - int(at.max()) - 1
     if joined == 0:
         return 0, nonmanifold
-    t = at.ravel()[mesh.triangles]
-    t = t[distinct_corners(t)]
-    return joined, int((edge_incidence(t).count > 2).sum())
+    return joined, int((edge_incidence(at.ravel()[mesh.triangles]).count > 2).sum())
 
 
 def closed_by_position(checks: MeshChecks, nonmanifold_by_position: int) -> bool:
