@@ -86,6 +86,19 @@ def test_winding_number_of_a_box_is_one_inside_and_zero_outside():
     assert np.allclose(w, [1, 1, 0, 0], atol=1e-9)
 
 
+def _nonmanifold_by_position(path):
+    """Sides of a binary STL's facets used more than twice, its corners joined by their float32 position: counted in
+    plain Python, not by our checks."""
+    corners = np.frombuffer(path.read_bytes()[84:], np.dtype([("n", "<f4", 3), ("c", "<f4", (3, 3)), ("a", "<u2")]))["c"]
+    sides: dict = {}
+    for tri in corners:
+        keys = [tuple(p) for p in tri.tolist()]
+        for k in range(3):
+            side = frozenset((keys[k], keys[(k + 1) % 3]))
+            sides[side] = sides.get(side, 0) + 1
+    return sum(n > 2 for n in sides.values())
+
+
 def test_solids_that_touch_are_apart_by_index_and_joined_in_the_file():
     """Two unit cubes face to face, the second moved 2e-8 mm along x (its corners on the shared face distinct from the
     first's in float64, one float32 position each): by index two closed shells; a reader that joins the file's
@@ -123,15 +136,7 @@ def test_slivers_the_float32_rounding_collapses_are_counted_as_the_file_read_bac
     assert checks.closed and checks.degenerate_triangles == 0
     joined, by_position = float32_joined(mesh, checks.nonmanifold_edges)
     write_stl(mesh, tmp_path / "s.stl")
-    corners = np.frombuffer((tmp_path / "s.stl").read_bytes()[84:],
-                            np.dtype([("n", "<f4", 3), ("c", "<f4", (3, 3)), ("a", "<u2")]))["c"]
-    sides: dict = {}
-    for tri in corners:
-        keys = [tuple(p) for p in tri.tolist()]
-        for k in range(3):
-            side = frozenset((keys[k], keys[(k + 1) % 3]))
-            sides[side] = sides.get(side, 0) + 1
-    assert joined == 1 and by_position == sum(n > 2 for n in sides.values()) == 2
+    assert joined == 1 and by_position == _nonmanifold_by_position(tmp_path / "s.stl") == 2
     assert check_mesh(read_stl(tmp_path / "s.stl")).nonmanifold_edges == by_position
     assert not closed_by_position(checks, by_position)
 
@@ -154,14 +159,7 @@ def test_convert_notes_what_a_reader_joining_by_position_sees(tmp_path, touching
     # the file read back and joined by position in plain Python (not our checks): edges used by more than two
     out = tmp_path / "touching.stl"
     write_result(r, out)
-    corners = np.frombuffer(out.read_bytes()[84:], np.dtype([("n", "<f4", 3), ("c", "<f4", (3, 3)), ("a", "<u2")]))["c"]
-    sides: dict = {}
-    for tri in corners:
-        keys = [tuple(p) for p in tri.tolist()]
-        for k in range(3):
-            side = frozenset((keys[k], keys[(k + 1) % 3]))
-            sides[side] = sides.get(side, 0) + 1
-    assert sum(n > 2 for n in sides.values()) == mesh["nonmanifold_edges_by_position"]
+    assert _nonmanifold_by_position(out) == mesh["nonmanifold_edges_by_position"]
     said = subprocess.run([sys.executable, "-m", "amprep", "convert", str(path), "-o", str(tmp_path / "cli.stl")],
                           capture_output=True, encoding="utf-8", errors="replace", timeout=300)
     assert said.returncode == 0 and "closed by index" in said.stdout, said.stdout + said.stderr
