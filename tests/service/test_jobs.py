@@ -239,7 +239,10 @@ def test_the_sweep_removes_left_over_files_and_nothing_else(service):
     for path in (orphan, tmp / "broken.zip", st.job_dir(kept["id"])):
         os.utime(path, (old, old))
     st.redis.delete(f"{P}orphan-lock", f"{P}sweep-lock")
-    assert st.sweep() >= 2
+    # the worker sweeps after each job it finishes, with the same function: on a busy machine its sweep after `kept`
+    # can start after the locks are gone and take the left-overs (and the lock) first, so the end state is asserted,
+    # not this call's count
+    st.sweep()
     assert not orphan.exists() and not (tmp / "broken.zip").exists()
     assert fresh.exists() and st.job_dir(kept["id"]).exists()
     with service.client() as c:
