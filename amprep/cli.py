@@ -76,6 +76,11 @@ def _write_json(path: str | None, data: dict[str, Any], indent: int = 1) -> None
             json.dump(data, fh, indent=indent, default=float)
 
 
+def _closed_by_index(by_position: int) -> str:
+    """The CLI's state of a mesh closed by index that joining its STL's vertices by float32 position opens."""
+    return f"closed by index, {by_position} non-manifold edges once joined by position"
+
+
 def cmd_convert(args: argparse.Namespace) -> int:
     from amprep.geometry.meshing.params import MeshParams
     from amprep.jobs.convert import convert, write_result
@@ -94,7 +99,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
         m, c = result.meshing, result.checks
         state = "closed" if c.closed else f"OPEN ({c.boundary_edges} boundary, {c.nonmanifold_edges} non-manifold edges)"
         if c.closed and not result.closed_by_position and str(args.output).lower().endswith(".stl"):
-            state = f"closed by index, {result.nonmanifold_by_position} non-manifold edges once joined by position"
+            state = _closed_by_index(result.nonmanifold_by_position)
         line = f"{args.output}: {c.triangles:,} triangles, {state}, {written['bytes']:,} bytes"
         if m is not None:
             line += f"; max chordal error {m.max_error:.4g} mm (tolerance {m.tolerance:.4g} mm)"
@@ -166,7 +171,7 @@ def cmd_refine(args: argparse.Namespace) -> int:
         b, a = rep["mesh_before"], rep["mesh"]
         state = "closed" if a["watertight"] else "open"
         if a["watertight"] and not a.get("closed_by_position", True) and out.suffix.lower() == ".stl":
-            state = f"closed by index, {a['nonmanifold_edges_by_position']} non-manifold edges once joined by position"
+            state = _closed_by_index(a["nonmanifold_edges_by_position"])
         bf = rep.get("butterfly")
         how = (f"{len(rep['refined_faces'])} face(s) refined by {rep['method'].upper()}" if bf is None else
                f"re-meshed to edges ≤ {bf['max_edge']:g} mm on the Butterfly limit surface (longest "

@@ -30,9 +30,10 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from convert import CORPUS, ROOT, wait_child  # noqa: E402  (stdlib only at import: this process stays small)
+
 sys.path.insert(0, str(ROOT))
-CORPUS = Path(os.environ.get("AMPREP_CORPUS", ROOT.parent / "shared" / "corpus"))
 CORPUS_STLS = ["featuretype_inch.stl", "voron_hotend_mount_dragon.stl", "voron_vhb_din_mount.stl", "counter_83k.stl",
                "adis16480_metres.stl", "voron_rear_skirt_nonmanifold.stl", "triangle_soup.stl"]
 #: defects planted in CTC-02's STL: triangles removed (3 boundary edges each) and flipped (3 misoriented edges each)
@@ -125,18 +126,12 @@ def timed(cmd: list[str], timeout: float) -> tuple[str, float, float]:
     with tempfile.TemporaryFile("w+") as sink:
         proc = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True,
                                 env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
-        start = time.monotonic()
-        pid, _, usage = os.wait4(proc.pid, os.WNOHANG)
-        while pid == 0 and time.monotonic() - start < timeout:
-            time.sleep(0.01)
-            pid, _, usage = os.wait4(proc.pid, os.WNOHANG)
-        wall = time.monotonic() - start
-        if pid == 0:
-            proc.kill()
-            os.wait4(proc.pid, 0)
+        ended = wait_child(proc, timeout, poll=0.01)
+        if ended is None:
             return "", float("nan"), float("nan")
+        _, usage, wall = ended
         sink.seek(0)
-        return sink.read(), wall, usage.ru_maxrss / 1024
+        return sink.read(), wall, usage.ru_maxrss / 1024  # type: ignore[attr-defined]
 
 
 _STAT = {"facets": r"Number of facets\s*:\s*(\d+)", "one": r"1 disconnected edge\s*:\s*(\d+)",

@@ -230,6 +230,21 @@ def _wanted(name: str, only: str) -> bool:
     return not only or any(s in name for s in only.split(","))
 
 
+def wait_child(proc: subprocess.Popen, timeout: float, poll: float = 0.05) -> tuple[int, object, float] | None:
+    """(wait status, resource usage (ru_maxrss: the child's peak RSS in KiB), wall seconds) of `proc` once it ends, or
+    None when it outlives `timeout` seconds (it is then killed and reaped)."""
+    start = time.monotonic()
+    pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+    while pid == 0 and time.monotonic() - start < timeout:
+        time.sleep(poll)
+        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+    if pid == 0:
+        proc.kill()
+        os.wait4(proc.pid, 0)
+        return None
+    return status, usage, time.monotonic() - start
+
+
 def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / "out.stl")
@@ -239,16 +254,10 @@ def run_one(tool: str, path: Path, tol: float, timeout: float) -> dict:
             # slowed OCCT's STEP reader ~15 %): all tools run alike
             env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
             proc = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True, env=env)
-            start = time.monotonic()
-            pid, status, _ = os.wait4(proc.pid, os.WNOHANG)
-            while pid == 0 and time.monotonic() - start < timeout:
-                time.sleep(0.05)
-                pid, status, _ = os.wait4(proc.pid, os.WNOHANG)
-            if pid == 0:
-                proc.kill()
-                os.wait4(proc.pid, 0)
+            ended = wait_child(proc, timeout)
+            if ended is None:
                 return {"error": f"timeout {timeout:.0f}s"}
-            proc.returncode = os.waitstatus_to_exitcode(status)
+            proc.returncode = os.waitstatus_to_exitcode(ended[0])
             sink.seek(0)
             text = sink.read()
         try:

@@ -52,8 +52,9 @@ def load_kernels() -> None:
 def warm_kernels(stop: Callable[[], bool] | None = None) -> None:
     """load_kernels(), then calls of each kernel (serial and parallel, and the projection's) on a cylinder and a
     B-spline face with the types of real calls: numba's first dispatch (its typing registry, ~0.3 s) is paid here, e.g.
-    while another process reads the file. numba is imported first (~0.3 s); when `stop()` is then True (the file is read already: a small
-    part, whose numpy measures cost less than the ~0.5 s left) nothing is loaded and the kernels stay unused."""
+    while another process reads the file. numba is imported first (~0.3 s); when `stop()` is then True (the file is
+    read already: a small part, whose numpy measures cost less than the ~0.5 s left) nothing is loaded and the kernels
+    stay unused."""
     _bspline.fork_safe_threads()  # imports numba
     if stop is not None and stop():
         return
