@@ -113,6 +113,25 @@ def test_solids_that_touch_are_apart_by_index_and_joined_in_the_file():
     assert float32_joined(apart) == (0, 0)
 
 
+def test_a_corner_written_as_minus_zero_is_joined_to_zero_as_the_file_read_back_joins_it(tmp_path):
+    """Two unit cubes face to face at x = 0, the second's corners there written −0.0: by index two closed shells; in
+    the file −0.0 and 0.0 are one position to a reader (read_stl, and the plain-Python count, where −0.0 == 0.0), so
+    the shared face's four sides and its diagonal are used by four triangles each."""
+    from amprep.geometry.core.checks import check_mesh, float32_joined
+    from amprep.geometry.io.stl import read_stl, write_stl
+
+    a, b = _box((-1, 0, 0), (0, 1, 1)), _box((0, 0, 0), (1, 1, 1))
+    bv = b[0].copy()
+    bv[bv[:, 0] == 0, 0] = -0.0
+    mesh = _mesh(a, (bv, b[1]))
+    assert np.signbit(mesh.vertices[:, 0]).sum() == 4 + 4  # a's four at −1 and b's four at −0.0
+    checks = check_mesh(mesh)
+    assert checks.closed and checks.nonmanifold_edges == 0
+    write_stl(mesh, tmp_path / "z.stl")
+    assert float32_joined(mesh, 0) == (4, 5) == (4, _nonmanifold_by_position(tmp_path / "z.stl"))
+    assert check_mesh(read_stl(tmp_path / "z.stl")).nonmanifold_edges == 5
+
+
 def test_slivers_the_float32_rounding_collapses_are_counted_as_the_file_read_back_has_them(tmp_path):
     """A box at 100 mm whose bottom edge is split 1e-7 mm from a corner (under float32's step there): closed by index;
     in the file the split point is the corner, and each of the two slivers beside it runs along one side twice. The
