@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -85,7 +86,7 @@ def main() -> None:
     from playwright.sync_api import sync_playwright
 
     load = _load_module()
-    tmp = Path(tempfile.mkdtemp(prefix="amprep-dash-"))
+    tmp = Path(tempfile.mkdtemp(prefix="amprep-dash-"))  # the tori's STLs, removed once the stack is down
     cases = [("2k, convert", torus(50, 20), "convert"), ("100k, analyze", torus(250, 200), "analyze"),
              ("1 M, convert", torus(1000, 500), "convert")]
     rows = []
@@ -99,6 +100,7 @@ def main() -> None:
             rows.append((name, mesh.n_triangles, path.stat().st_size, m))
             print(name, m, flush=True)
         browser.close()
+    shutil.rmtree(tmp, ignore_errors=True)
     renderer = rows[0][3]["renderer"]
     lines = ["| part | triangles | STL | canvas (px) | first frame (ms after the page starts loading) | "
              "turning, full mesh (frames/s) | moving copy (triangles) | turning as a drag draws it (frames/s) |",

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -97,6 +98,7 @@ def stack(workers: int = 2, **env_extra: str) -> Iterator[Stack]:
                 os.killpg(p.pid, signal.SIGKILL)
         s.redis.terminate()
         s.redis.wait(10)
+        shutil.rmtree(data, ignore_errors=True)  # the Redis dump, the jobs' files and the logs (read inside the block)
 
 
 @dataclass

@@ -87,22 +87,23 @@ def main() -> None:
         rows = [json.loads(line) for line in Path(args.from_log).read_text().splitlines() if line.startswith("{")]
         write_tables(rows, args, len({r["part"] for r in rows}), complete=False)
         return
-    tmp = Path(tempfile.mkdtemp(prefix="amprep-real-"))
-    parts = write_built_parts(tmp / "built") if args.built else package_parts(args.package, tmp)
-    if 0 < args.sample < len(parts):
-        parts = [parts[i] for i in np.linspace(0, len(parts) - 1, args.sample).round().astype(int)]
-    only = _listed_parts(args)
-    kept = _kept_rows(ROOT / "docs" / f"{args.name}.csv", set(args.rerun.split(",")), only) if args.rerun else {}
-    rows = []
-    for part in parts:
-        label = str(part.relative_to(tmp)).replace("tree/usr/share/", "")
-        for tol in (float(t) for t in args.tolerances.split(",")):
-            for tool in args.tools.split(","):
-                row = kept.get((label, tol, tool))
-                if row is None:
-                    row = {"part": label, "tolerance": tol, "tool": tool, **run_one(tool, part, tol, args.timeout)}
-                    print(json.dumps(row), flush=True)
-                rows.append(row)
+    with tempfile.TemporaryDirectory(prefix="amprep-real-") as name:  # the unpacked package: KiCad's is 5.7 GB
+        tmp = Path(name)
+        parts = write_built_parts(tmp / "built") if args.built else package_parts(args.package, tmp)
+        if 0 < args.sample < len(parts):
+            parts = [parts[i] for i in np.linspace(0, len(parts) - 1, args.sample).round().astype(int)]
+        only = _listed_parts(args)
+        kept = _kept_rows(ROOT / "docs" / f"{args.name}.csv", set(args.rerun.split(",")), only) if args.rerun else {}
+        rows = []
+        for part in parts:
+            label = str(part.relative_to(tmp)).replace("tree/usr/share/", "")
+            for tol in (float(t) for t in args.tolerances.split(",")):
+                for tool in args.tools.split(","):
+                    row = kept.get((label, tol, tool))
+                    if row is None:
+                        row = {"part": label, "tolerance": tol, "tool": tool, **run_one(tool, part, tol, args.timeout)}
+                        print(json.dumps(row), flush=True)
+                    rows.append(row)
     write_tables(rows, args, len(parts))
 
 

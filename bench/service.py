@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import shutil
 import signal
 import statistics
 import subprocess
@@ -134,6 +135,7 @@ def main() -> None:
     finally:
         os.killpg(serve.pid, signal.SIGINT)
         serve.wait(60)
+        shutil.rmtree(data, ignore_errors=True)  # the service's Redis dump, jobs and logs
 
     title = f"Service benchmark: `{args.part}`, `amprep serve --workers 2`, 2-core VM"
     lines = [f"# {title}", "", "| measure | value | unit |", "|---|---:|---|"]
