@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -86,21 +85,20 @@ def main() -> None:
     from playwright.sync_api import sync_playwright
 
     load = _load_module()
-    tmp = Path(tempfile.mkdtemp(prefix="amprep-dash-"))  # the tori's STLs, removed once the stack is down
     cases = [("2k, convert", torus(50, 20), "convert"), ("100k, analyze", torus(250, 200), "analyze"),
              ("1 M, convert", torus(1000, 500), "convert")]
     rows = []
-    with load.stack(1, AMPREP_MAX_TRIANGLES="2000000") as s, sync_playwright() as p:
+    with (tempfile.TemporaryDirectory(prefix="amprep-dash-") as tmp, load.stack(1, AMPREP_MAX_TRIANGLES="2000000") as s,
+          sync_playwright() as p):
         browser = p.chromium.launch(executable_path=chromium_path(), args=ARGS)
         for name, mesh, kind in cases:
-            path = tmp / f"torus_{mesh.n_triangles}.stl"
+            path = Path(tmp) / f"torus_{mesh.n_triangles}.stl"
             write_stl(mesh, path)
             jid = job(s.url, path, kind)
             m = measure(browser, s.url, jid, args.seconds)
             rows.append((name, mesh.n_triangles, path.stat().st_size, m))
             print(name, m, flush=True)
         browser.close()
-    shutil.rmtree(tmp, ignore_errors=True)
     renderer = rows[0][3]["renderer"]
     lines = ["| part | triangles | STL | canvas (px) | first frame (ms after the page starts loading) | "
              "turning, full mesh (frames/s) | moving copy (triangles) | turning as a drag draws it (frames/s) |",

@@ -74,18 +74,17 @@ def float32_joined(mesh: Mesh, nonmanifold: int = 0) -> tuple[int, int]:
     """(joined, nonmanifold by position): the vertices that share their float32 position (what STL and 3MF store;
     −0.0 is 0.0) with another vertex, less the positions they take, and the edges used by more than two triangles once
     vertices are joined by that position, as a reader that welds a file by position sees them ((0, `nonmanifold`, the
-    mesh's own
-    count) when no two vertices share one). The mesh's own checks go by index: two solids that touch stay apart
-    there, not in the file. A triangle whose corners the rounding joins stays in the count, as check_mesh counts the
-    file read back: one with two corners at one position runs along its third side twice, both ways (a sliver whose
-    short side is under float32's step; a reader that drops degenerate facets finds its neighbours closed)."""
+    mesh's own count) when no two vertices share one). The mesh's own checks go by index: two solids that touch stay
+    apart there, not in the file. A triangle whose corners the rounding joins stays in the count, as check_mesh counts
+    the file read back: one with two corners at one position runs along its third side twice, both ways (a sliver
+    whose short side is under float32's step; a reader that drops degenerate facets finds its neighbours closed)."""
     if mesh.n_triangles == 0:
         return 0, nonmanifold
     at, first = group_rows(mesh.vertices.astype(np.float32))
     joined = mesh.n_vertices - len(first)
     if joined == 0:
         return 0, nonmanifold
-    return joined, int((edge_incidence(at.ravel()[mesh.triangles]).count > 2).sum())
+    return joined, int((edge_incidence(at[mesh.triangles]).count > 2).sum())
 
 
 def closed_by_position(checks: MeshChecks, nonmanifold_by_position: int) -> bool:
