@@ -26,7 +26,7 @@ def test_a_small_file_that_would_mesh_huge_is_refused_before_meshing(service, tm
     step = _torus_step(tmp_path / "torus.step")
     assert step.stat().st_size < 20_000
     with service.client() as c:
-        # 10,000,000 by default, lowered to the server's cap: ~1.3 M triangles expected at 0.0001 mm
+        # 10,000,000 by default, lowered to the server's cap: ~2.7 M triangles expected at 0.0001 mm
         job = submit(c, step, params=json.dumps({"tolerance": 1e-4, "reuse": False})).json()
         job = wait_status(c, job["id"], ("succeeded", "failed"), 300)
         assert job["status"] == "failed" and job["error"]["code"] == "output_too_large", job.get("error")

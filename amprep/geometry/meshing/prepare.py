@@ -117,12 +117,12 @@ def faces_to_mesh_ourselves(faces: tuple[TopoDS_Face, ...] | list[TopoDS_Face], 
             if (n := expected_triangles(f, tolerance)) > 0 and n >= OWN_MESH_MIN and not has_pole(f)]
 
 
-#: the quality mesher's triangles over the B-rep estimate (estimate.py), the fewest seen on the corpus: 0.39 (the hull at
-#: 0.01 mm, whose B-rep estimate takes its largest curvature everywhere); the most: 27. Before its edges exist a model
-#: is refused only when even this × the B-rep estimate is over the limit; quality_estimate decides once they do
+#: the quality mesher's triangles over the B-rep estimate (estimate.py), the fewest seen on the corpus: 0.81 (the lens at
+#: 0.34 mm, a few large B-spline faces); the most: 15 (as1 at 0.01 mm). Before its edges exist a model is refused only
+#: when even this × the B-rep estimate is over the limit; quality_estimate decides once they do
 QUALITY_LEAST_FACTOR = 0.25
-#: the quality mesher's triangles over the B-rep estimate, typically (the corpus: 4–8 at 0.34 mm): its first estimate,
-#: which decides whether the compiled kernels are loaded before any face is meshed
+#: the quality mesher's triangles over the B-rep estimate, typically (the corpus: 2–6.5 at 0.34 mm, 1.4–15 at
+#: 0.01 mm): its first estimate, which decides whether the compiled kernels are loaded before any face is meshed
 QUALITY_ESTIMATE_FACTOR = 6
 
 
@@ -131,9 +131,9 @@ def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Inst
     placement; × QUALITY_ESTIMATE_FACTOR for the quality mesher); output_too_large, before any meshing, when it
     exceeds params.max_triangles (for the quality mesher: when QUALITY_LEAST_FACTOR × the B-rep estimate does)."""
     if inst is None:
-        n = estimate_triangles(model, tol, params.angular)
+        n = estimate_triangles(model, tol, params.angular, min_size=params.min_size)
     else:
-        n = estimate_triangles(inst.template, tol, params.angular, face_uses(inst))
+        n = estimate_triangles(inst.template, tol, params.angular, face_uses(inst), params.min_size)
     least = n * QUALITY_LEAST_FACTOR if params.quality else n
     if least > params.max_triangles:
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm this model would mesh to about {least:,.0f} "
