@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.core.limits import DEFAULT_MAX_TRIANGLES, MAX_TRIANGLES_CAP, MIN_TOLERANCE
+from amprep.geometry.core.limits import DEFAULT_MAX_TRIANGLES, MAX_TOLERANCE, MAX_TRIANGLES_CAP, MIN_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,7 @@ class JobKind:
 
 def _meshing(tolerance: float, help_tolerance: str) -> tuple[Param, ...]:
     return (
-        Param("tolerance", "float", tolerance, help_tolerance, "mm", ge=MIN_TOLERANCE, le=100),
+        Param("tolerance", "float", tolerance, help_tolerance, "mm", ge=MIN_TOLERANCE, le=MAX_TOLERANCE),
         Param("relative", "float", None, "Tolerance as a fraction of the bounding-box diagonal (replaces tolerance; "
               f"the result must be at least {MIN_TOLERANCE:g} mm)", ge=1e-6, lt=1, optional=True),
         Param("angular", "float", 0.5, "Largest angle one segment of a curved edge turns through", "rad", gt=0, le=1.57),

@@ -3,6 +3,7 @@ then gives, on the corpus; a model estimated over max_triangles is refused befor
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from OCP.BRep import BRep_Tool
 from OCP.BRepTools import BRepTools
@@ -85,6 +86,43 @@ def test_a_model_over_the_limit_is_refused_before_meshing(reference_solids):
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE and "100,000" in e.value.message
     assert all(BRep_Tool.Triangulation_s(f, TopLoc_Location()) is None for f in model.faces)
     assert mesh_model(model, MeshParams(tolerance=0.1, max_triangles=100_000)).mesh.n_triangles > 0
+
+
+def test_a_refusal_names_a_tolerance_that_fits(reference_solids):
+    """The torus at 0.0001 mm under a limit of 100k: the refusal names the finest tolerance whose estimate fits
+    (to the rounding up of its two digits); meshed at it, the torus is within the limit and the tolerance."""
+    import re
+
+    model = model_from_shape(reference_solids["torus"])
+    with pytest.raises(AmprepError) as e:
+        mesh_model(model, MeshParams(tolerance=1e-4, max_triangles=100_000))
+    fit = float(re.search(r"about ([0-9.e-]+) mm would fit", e.value.message).group(1))
+    angular = MeshParams().angular
+    assert estimate_triangles(model, fit, angular) <= 100_000 < estimate_triangles(model, fit / 1.15, angular)
+    r = mesh_model(model, MeshParams(tolerance=fit, max_triangles=100_000))
+    assert 0 < r.mesh.n_triangles <= 100_000 and r.max_error <= fit
+
+
+def test_the_fitting_tolerance_is_the_finest_that_fits_or_none():
+    """fitting_tolerance on counts known in closed form: the first tolerance whose count is under the limit, rounded up
+    to two digits; None when no tolerance up to the coarsest allowed fits; its calls bounded by the search."""
+    from amprep.geometry.core.limits import MAX_TOLERANCE
+    from amprep.geometry.meshing.prepare import FIT_GROWTH, FIT_HALVINGS, fitting_tolerance
+
+    calls: list[float] = []
+
+    def count(t: float) -> float:
+        calls.append(t)
+        return 1000 / t
+
+    for tol, limit in ((1e-4, 100), (0.003, 70), (0.01, 2e4)):
+        calls.clear()
+        fit = fitting_tolerance(count, tol, int(limit))
+        assert fit > tol and count(fit) <= limit < count(fit / 1.15), (tol, limit, fit)
+        assert fit == float(f"{fit:.2g}")
+        assert len(calls) <= np.log(MAX_TOLERANCE / tol) / np.log(FIT_GROWTH) + FIT_HALVINGS + 3
+    assert fitting_tolerance(lambda t: 1e9, 1e-4, 100) is None
+    assert fitting_tolerance(count, 0.003, 7) is None  # 1000 / t ≤ 7 from t = 143 mm, past the coarsest
 
 
 @pytest.mark.parametrize("name", CAD_FILES)

@@ -4,6 +4,8 @@ BRepMesh at that tolerance (brepmesh.py)."""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +20,7 @@ from amprep.geometry.cad.estimate import estimate_triangles
 from amprep.geometry.cad.instances import Instancing, find_instancing, template_face_of
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface, tangents
-from amprep.geometry.core.limits import MIN_TOLERANCE
+from amprep.geometry.core.limits import MAX_TOLERANCE, MIN_TOLERANCE
 from amprep.geometry.meshing.brepmesh import run_brepmesh
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.shared_edges import has_pole
@@ -129,18 +131,49 @@ QUALITY_ESTIMATE_FACTOR = 6
 def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Instancing | None = None) -> int:
     """The model's estimated triangle count (estimate.py; with `inst`, its template's faces counted once per
     placement; × QUALITY_ESTIMATE_FACTOR for the quality mesher); output_too_large, before any meshing, when it
-    exceeds params.max_triangles (for the quality mesher: when QUALITY_LEAST_FACTOR × the B-rep estimate does)."""
-    if inst is None:
-        n = estimate_triangles(model, tol, params.angular, min_size=params.min_size)
-    else:
-        n = estimate_triangles(inst.template, tol, params.angular, face_uses(inst), params.min_size)
+    exceeds params.max_triangles (for the quality mesher: when QUALITY_LEAST_FACTOR × the B-rep estimate does),
+    naming the finest tolerance whose estimate would fit (fitting_tolerance; × QUALITY_ESTIMATE_FACTOR for the
+    quality mesher)."""
+
+    def estimate(t: float) -> int:
+        if inst is None:
+            return estimate_triangles(model, t, params.angular, min_size=params.min_size)
+        return estimate_triangles(inst.template, t, params.angular, face_uses(inst), params.min_size)
+
+    n = estimate(tol)
     least = n * QUALITY_LEAST_FACTOR if params.quality else n
     if least > params.max_triangles:
+        factor = QUALITY_ESTIMATE_FACTOR if params.quality else 1
+        fit = fitting_tolerance(lambda t: estimate(t) * factor, tol, params.max_triangles)
+        hint = f" (about {fit:g} mm would fit)" if fit is not None else ""
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm this model would mesh to about {least:,.0f} "
                           f"triangles{' at least' if params.quality else ''}, over the limit of "
-                          f"{params.max_triangles:,}: use a coarser tolerance or a higher max_triangles (the estimate "
-                          "is made from the B-rep before meshing)")
+                          f"{params.max_triangles:,}: use a coarser tolerance{hint} or a higher max_triangles (the "
+                          "estimate is made from the B-rep before meshing)")
     return n * QUALITY_ESTIMATE_FACTOR if params.quality else n
+
+
+#: a refusal's tolerance that would fit is looked for in steps of this × the tolerance asked for, up to MAX_TOLERANCE
+FIT_GROWTH = 4.0
+#: then the last step's interval is halved this many times in log scale (4^(1/2^8): to 0.5 %)
+FIT_HALVINGS = 8
+
+
+def fitting_tolerance(count: Callable[[float], float], tol: float, limit: int) -> float | None:
+    """The finest tolerance over `tol` whose count(t) ≤ limit (count non-increasing in t), to 0.5 % and rounded up
+    to two significant digits; None when none up to MAX_TOLERANCE does (a count the tolerance does not set: flat
+    faces' boundaries, many faces). At most log_4(MAX_TOLERANCE / tol) + FIT_HALVINGS calls of count."""
+    lo, hi = tol, tol * FIT_GROWTH
+    while count(hi) > limit:
+        if hi >= MAX_TOLERANCE:
+            return None
+        lo, hi = hi, min(hi * FIT_GROWTH, MAX_TOLERANCE)
+    for _ in range(FIT_HALVINGS):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if count(mid) > limit else (lo, mid)
+    step = 10.0 ** (math.floor(math.log10(hi)) - 1)
+    fit = math.ceil(hi / step * (1 - 1e-12)) * step
+    return float(f"{fit:.2g}")
 
 
 def face_uses(inst: Instancing) -> np.ndarray:
