@@ -3,6 +3,8 @@ then gives, on the corpus; a model estimated over max_triangles is refused befor
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from OCP.BRep import BRep_Tool
@@ -91,8 +93,6 @@ def test_a_model_over_the_limit_is_refused_before_meshing(reference_solids):
 def test_a_refusal_names_a_tolerance_that_fits(reference_solids):
     """The torus at 0.0001 mm under a limit of 100k: the refusal names the finest tolerance whose estimate fits
     (to the rounding up of its two digits); meshed at it, the torus is within the limit and the tolerance."""
-    import re
-
     model = model_from_shape(reference_solids["torus"])
     with pytest.raises(AmprepError) as e:
         mesh_model(model, MeshParams(tolerance=1e-4, max_triangles=100_000))
@@ -157,6 +157,12 @@ def test_the_quality_meshers_estimate_refuses_before_any_face_is_meshed(meshed_f
         mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", max_triangles=45_000, parallel=False))
     assert e.value.code == ErrorCode.OUTPUT_TOO_LARGE and "before any face is meshed" in e.value.message
     assert not started
+    # the refusal names a tolerance (its estimate scaled by the B-rep estimate's) at which the part is meshed within
+    # the limit and the tolerance
+    fit = float(re.search(r"about ([0-9.e-]+) mm would fit", e.value.message).group(1))
+    assert fit > 0.01
+    r = mesh_model(model, MeshParams(tolerance=fit, mesher="quality", max_triangles=45_000))
+    assert 0 < r.mesh.n_triangles <= 45_000 and r.max_error <= fit
 
 
 def test_the_quality_meshers_estimate_counts_each_placement():

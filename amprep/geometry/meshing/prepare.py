@@ -242,15 +242,23 @@ def quality_estimate(surfaces: list[Surface], loops: list[list[dict]], segments:
     return out
 
 
-def refuse_quality_too_large(expected: np.ndarray, made: int, tol: float, limit: int) -> int:
+def refuse_quality_too_large(expected: np.ndarray, made: int, tol: float, limit: int,
+                             brep: Callable[[float], float] | None = None) -> int:
     """Σ expected (F,) + `made` (triangles already made, kept as they are), rounded up; output_too_large when over
-    `limit`, before any face is meshed."""
+    `limit`, before any face is meshed, naming the finest tolerance that would fit when `brep` (the B-rep estimate
+    at a tolerance) is given: where brep(t) × this estimate / brep(tol) fits (fitting_tolerance). On the corpus the
+    quality mesher's count over the B-rep estimate falls as the tolerance coarsens (as1: 15 at 0.01 mm, 5.5 at
+    0.34), so the tolerance named errs coarse."""
     n = int(np.ceil(expected.sum())) + made
     if n > limit:
+        fit = None
+        if brep is not None and (at := brep(tol)) > 0:
+            fit = fitting_tolerance(lambda t: brep(t) * n / at, tol, limit)
+        hint = f" (about {fit:g} mm would fit)" if fit is not None else ""
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm the quality mesher would make about {n:,} "
-                          f"triangles, over the limit of {limit:,}: use a coarser tolerance, the default mesher or a "
-                          "higher max_triangles (the estimate is made from the edges and the faces' curvature before "
-                          "any face is meshed)")
+                          f"triangles, over the limit of {limit:,}: use a coarser tolerance{hint}, the default mesher "
+                          "or a higher max_triangles (the estimate is made from the edges and the faces' curvature "
+                          "before any face is meshed)")
     return n
 
 
