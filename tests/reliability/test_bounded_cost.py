@@ -204,7 +204,7 @@ def test_the_triangle_limit_stops_meshing_as_the_faces_come_when_the_estimate_wa
     whole = mesh_model(model, params).mesh.n_triangles
     calls, _ = meshed_faces
     calls.clear()
-    monkeypatch.setattr(prepare, "estimate_triangles", lambda *a, **k: 1)
+    monkeypatch.setattr(prepare, "TriangleEstimate", lambda *a, **k: lambda tol: 1)
     monkeypatch.setattr(enforce, "quality_estimate", lambda surfaces, *a, **k: np.zeros(len(surfaces)))
     with pytest.raises(AmprepError) as e:
         mesh_model(model, MeshParams(tolerance=0.01, mesher="quality", parallel=False, max_triangles=whole // 3))
@@ -227,7 +227,7 @@ def test_one_face_stops_refining_at_the_triangle_limit(reference_solids, monkeyp
     params = dict(tolerance=0.005, mesher=mesher, force_fallback=mesher == "occt", parallel=False)
     monkeypatch.setattr(lattice, "LATTICE_MIN", np.inf)  # no rows (the torus has no pole): theirs is checked before
     whole = mesh_model(model, MeshParams(**params)).mesh.n_triangles
-    monkeypatch.setattr(prepare, "estimate_triangles", lambda *a, **k: 1)
+    monkeypatch.setattr(prepare, "TriangleEstimate", lambda *a, **k: lambda tol: 1)
     monkeypatch.setattr(enforce, "quality_estimate", lambda surfaces, *a, **k: np.zeros(len(surfaces)))
     _, finished = meshed_faces
     finished.clear()

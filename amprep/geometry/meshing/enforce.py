@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.cad.estimate import estimate_triangles
+from amprep.geometry.cad.estimate import TriangleEstimate
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
 from amprep.geometry.cad.topology import Topology, face_edges
@@ -325,8 +325,8 @@ def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned
     expected = quality_estimate([f.surfaces[i] for i in remesh], loops, segments, rows, f.tol)  # type: ignore[misc]
     f.expected = {i: REMESH_PER_FACE + float(n) for i, n in zip(remesh, expected, strict=True)}
     placed = expected * f.uses[remesh]
-    f.estimated = refuse_quality_too_large(placed, kept, f.tol, f.params.max_triangles, lambda t: estimate_triangles(
-        f.model, t, f.params.angular, f.uses, f.params.min_size))
+    f.estimated = refuse_quality_too_large(placed, kept, f.tol, f.params.max_triangles, lambda: TriangleEstimate(
+        f.model.faces, f.params.angular, f.uses, f.params.min_size))
     free_form = free_form_work(placed, [f.surfaces[i] for i in remesh])
     return worth_compiling(f.estimated, f.params.check_order, free_form)
 

@@ -16,7 +16,7 @@ from OCP.GeomAbs import GeomAbs_Torus
 from OCP.TopoDS import TopoDS_Face
 
 from amprep.errors import AmprepError, ErrorCode
-from amprep.geometry.cad.estimate import estimate_triangles
+from amprep.geometry.cad.estimate import TriangleEstimate
 from amprep.geometry.cad.instances import Instancing, find_instancing, template_face_of
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface, tangents
@@ -134,12 +134,10 @@ def refuse_too_large(model: CadModel, params: MeshParams, tol: float, inst: Inst
     exceeds params.max_triangles (for the quality mesher: when QUALITY_LEAST_FACTOR × the B-rep estimate does),
     naming the finest tolerance whose estimate would fit (fitting_tolerance; × QUALITY_ESTIMATE_FACTOR for the
     quality mesher)."""
-
-    def estimate(t: float) -> int:
-        if inst is None:
-            return estimate_triangles(model, t, params.angular, min_size=params.min_size)
-        return estimate_triangles(inst.template, t, params.angular, face_uses(inst), params.min_size)
-
+    if inst is None:
+        estimate = TriangleEstimate(model.faces, params.angular, min_size=params.min_size)
+    else:
+        estimate = TriangleEstimate(inst.template.faces, params.angular, face_uses(inst), params.min_size)
     n = estimate(tol)
     least = n * QUALITY_LEAST_FACTOR if params.quality else n
     if least > params.max_triangles:
@@ -243,17 +241,17 @@ def quality_estimate(surfaces: list[Surface], loops: list[list[dict]], segments:
 
 
 def refuse_quality_too_large(expected: np.ndarray, made: int, tol: float, limit: int,
-                             brep: Callable[[float], float] | None = None) -> int:
+                             brep: Callable[[], Callable[[float], float]] | None = None) -> int:
     """Σ expected (F,) + `made` (triangles already made, kept as they are), rounded up; output_too_large when over
-    `limit`, before any face is meshed, naming the finest tolerance that would fit when `brep` (the B-rep estimate
-    at a tolerance) is given: where brep(t) × this estimate / brep(tol) fits (fitting_tolerance). On the corpus the
+    `limit`, before any face is meshed, naming the finest tolerance that would fit when `brep` gives the B-rep
+    estimate (made only then): where brep(t) × this estimate / brep(tol) fits (fitting_tolerance). On the corpus the
     quality mesher's count over the B-rep estimate falls as the tolerance coarsens (as1: 15 at 0.01 mm, 5.5 at
     0.34), so the tolerance named errs coarse."""
     n = int(np.ceil(expected.sum())) + made
     if n > limit:
         fit = None
-        if brep is not None and (at := brep(tol)) > 0:
-            fit = fitting_tolerance(lambda t: brep(t) * n / at, tol, limit)
+        if brep is not None and (at := (estimate := brep())(tol)) > 0:
+            fit = fitting_tolerance(lambda t: estimate(t) * n / at, tol, limit)
         hint = f" (about {fit:g} mm would fit)" if fit is not None else ""
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm the quality mesher would make about {n:,} "
                           f"triangles, over the limit of {limit:,}: use a coarser tolerance{hint}, the default mesher "
