@@ -42,11 +42,16 @@ SAMPLES = 5
 #: doubly curved B-splines over the tolerance, and the enforcement's insertions halve the triangles that are over
 #: it: about twice that (the spheres and tori of CTC-02's B-spline twin, re-meshed at 0.01 mm: 1.8–2.0 × the grid)
 FREE_FORM_DENSITY = 8.0
-#: BRepMesh's angle for every face is this × the angular deflection (meshing.brepmesh.run_brepmesh gives it the
-#: edges' angle, twice the user's: OCCT halves it for edges)
-OCCT_ANGLE = 2.0
-#: and its MinSize, when the user sets none, this × the tolerance
+#: BRepMesh discretises edges at this × the deflection and the angle it is given (BRepMesh_CurveTessellator), so
+#: meshing.brepmesh.run_brepmesh gives it the user's angle over this; its range splitters take that angle for faces
+OCCT_EDGE_FACTOR = 0.5
+#: BRepMesh's MinSize, when the user sets none, is this × the tolerance
 OCCT_MIN_SIZE = 0.1
+
+
+def occt_min_size(tol: float, min_size: float) -> float:
+    """The MinSize run_brepmesh gives BRepMesh: the user's `min_size`, else max(OCCT_MIN_SIZE × tol, 1e-7)."""
+    return min_size if min_size > 0 else max(OCCT_MIN_SIZE * tol, 1e-7)
 
 
 #: an edge's curvature in FaceShape.edges for a line (one segment) and for an edge with no curve (none)
@@ -222,6 +227,9 @@ class TriangleEstimate:
         self.edges = np.concatenate([s.edges for s in shapes]) if shapes else np.zeros((0, 2))
         self.edge_face = np.repeat(np.arange(len(shapes)), [len(s.edges) for s in shapes])
         self.free = np.array([i for i, s in enumerate(shapes) if s.kind == FREE], np.int64)
+        self.analytic = [i for i, s in enumerate(shapes) if s.kind in (SPHERE, CONE, TORUS)]
+        self.stored = np.array([s.kind == STORED for s in shapes], bool)
+        self.kept = np.array([s.stored for s in shapes], float)
         self.jacobian = np.array([shapes[i].jacobian for i in self.free]).reshape(-1, SAMPLES**2)
         self.kappa = np.array([shapes[i].kappa for i in self.free]).reshape(-1, SAMPLES**2, 2)
         self.cell = np.array([shapes[i].cell for i in self.free], float)
@@ -232,13 +240,10 @@ class TriangleEstimate:
         boundary = np.bincount(self.edge_face, edge_segments(self.edges, tol, self.angular), minlength=n)
         interior = np.zeros(n)
         interior[self.free] = free_form_interior(self.jacobian, self.kappa, self.cell, tol, self.angular)
-        angle = OCCT_ANGLE * self.angular
-        min_size = self.min_size if self.min_size > 0 else OCCT_MIN_SIZE * tol
-        for i, s in enumerate(self.shapes):
-            if s.kind in (SPHERE, CONE, TORUS):
-                interior[i] = 2 * analytic_nodes(s, tol, angle, min_size)
-        stored = np.array([s.kind == STORED for s in self.shapes], bool)
-        return np.where(stored, [s.stored for s in self.shapes], np.maximum(interior + boundary, 1.0))
+        angle, min_size = self.angular / OCCT_EDGE_FACTOR, occt_min_size(tol, self.min_size)
+        for i in self.analytic:
+            interior[i] = 2 * analytic_nodes(self.shapes[i], tol, angle, min_size)
+        return np.where(self.stored, self.kept, np.maximum(interior + boundary, 1.0))
 
     def __call__(self, tol: float) -> int:
         """The expected count at `tol`: Σ counts × weights, rounded up."""

@@ -30,6 +30,7 @@ from OCP.TopAbs import TopAbs_FACE
 from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
+from amprep.geometry.cad.estimate import OCCT_EDGE_FACTOR, occt_min_size
 from amprep.geometry.cad.surfaces import is_ruled
 from amprep.geometry.cad.topology import compound, explore
 from amprep.geometry.meshing.params import MeshParams
@@ -37,8 +38,6 @@ from amprep.geometry.meshing.params import MeshParams
 #: edges where only ruled faces meet are discretised at this × the tolerance (their faces' error is about the
 #: edges' sagitta; a little under 1 so that OCCT's face interiors, meshed at the tolerance, rarely exceed it)
 EDGE_TARGET = 0.95
-#: BRepMesh discretises edges at this × the deflection and the angle it is given (BRepMesh_CurveTessellator)
-OCCT_EDGE_FACTOR = 0.5
 
 
 _pool_started = False  # True once this process ran BRepMesh in parallel (OCCT's thread pool then has threads)
@@ -89,7 +88,7 @@ def _brepmesh(shape: TopoDS_Shape, tolerance: float, params: MeshParams, deflect
     if params.parallel:
         global _pool_started
         _pool_started = True
-    p.MinSize = params.min_size if params.min_size > 0 else max(tolerance * 0.1, 1e-7)
+    p.MinSize = occt_min_size(tolerance, params.min_size)
     p.MeshAlgo = IMeshTools_MeshAlgoType_Delabella if params.algorithm == "delabella" else IMeshTools_MeshAlgoType_Watson
     # OCCT's interior deflection control (test points, insert, re-triangulate, repeat) is 90 % of its time on
     # free-form parts and still leaves faces over tolerance; our per-triangle check and local insertion replace it

@@ -250,8 +250,11 @@ def refuse_quality_too_large(expected: np.ndarray, made: int, tol: float, limit:
     n = int(np.ceil(expected.sum())) + made
     if n > limit:
         fit = None
-        if brep is not None and (at := (estimate := brep())(tol)) > 0:
-            fit = fitting_tolerance(lambda t: estimate(t) * n / at, tol, limit)
+        if brep is not None:
+            estimate = brep()
+            at = estimate(tol)
+            if at > 0:
+                fit = fitting_tolerance(lambda t: estimate(t) * n / at, tol, limit)
         hint = f" (about {fit:g} mm would fit)" if fit is not None else ""
         raise AmprepError(ErrorCode.OUTPUT_TOO_LARGE, f"at {tol:g} mm the quality mesher would make about {n:,} "
                           f"triangles, over the limit of {limit:,}: use a coarser tolerance{hint}, the default mesher "
