@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from amprep.geometry.cad.read import model_from_shape
-from amprep.geometry.meshing.lattice import _zip
+from amprep.geometry.meshing.lattice import zip_rows
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 from tests.geometry.test_mesher import EXACT_DISTANCE, _closed_solid, _sample_triangles
@@ -114,7 +114,7 @@ def test_zip_fills_the_strip_once_counter_clockwise(na, nb, stagger):
     inner = (np.arange(nb - 2) + 1 + stagger) / (nb - 1) if nb > 2 else np.zeros(0)
     bu = np.concatenate([[0.0], np.clip(inner, 1e-3, 1 - 1e-3), [1.0]])
     a, b = np.arange(na), na + np.arange(nb)
-    tris = _zip(a, au, b, bu, np.zeros(na, np.int64), np.zeros(nb, np.int64))
+    tris = zip_rows(a, au, b, bu, np.zeros(na, np.int64), np.zeros(nb, np.int64))
     uv = np.concatenate([np.stack([au, np.zeros(na)], 1), np.stack([bu, np.ones(nb)], 1)])
     assert len(tris) == na + nb - 2
     p = uv[tris]

@@ -164,3 +164,16 @@ def compound(shapes: list) -> TopoDS_Compound:  # type: ignore[type-arg]
 def face_edges(face: TopoDS_Face) -> list[TopoDS_Edge]:
     """The oriented edges of a face (a seam edge comes twice, once per orientation)."""
     return explore(face, TopAbs_EDGE, TopoDS.Edge_s)
+
+
+def faces_of_edge(faces: list[TopoDS_Face], topo: Topology, edge_index: int) -> set[int]:
+    """Ids of the faces (indices into `faces`, the model's) bounded by a B-rep edge (an edge → faces map kept on the
+    topology)."""
+    cache = getattr(topo, "_edge_faces", None)
+    if cache is None:
+        cache = {}
+        for i, face in enumerate(faces):
+            for e in face_edges(face):
+                cache.setdefault(topo.edge_index(e), set()).add(i)
+        topo._edge_faces = cache  # type: ignore[attr-defined]
+    return cache.get(edge_index, set())  # type: ignore[no-any-return]

@@ -17,7 +17,7 @@ from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.estimate import TriangleEstimate
 from amprep.geometry.cad.read import CadModel
 from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.cad.topology import Topology, face_edges
+from amprep.geometry.cad.topology import Topology, face_edges, faces_of_edge
 from amprep.geometry.core.compiled import compiled
 from amprep.geometry.core.progress import Progress, ProgressFn, budgeted, checkpoint, grew_over
 from amprep.geometry.measure.chordal import (
@@ -27,7 +27,7 @@ from amprep.geometry.measure.chordal import (
     triangle_chordal_error,
     worth_compiling,
 )
-from amprep.geometry.meshing.face_mesher import boundary_loops, mesh_face
+from amprep.geometry.meshing.face_mesher import bare_ruled_seam, boundary_loops, mesh_face, ruled_patch
 from amprep.geometry.meshing.lattice import Field, mesh_lattice, plan_lattices
 from amprep.geometry.meshing.local_refine import flat_triangles, flip_flat_triangles, refine_patch
 from amprep.geometry.meshing.occt_check import patch_error
@@ -164,6 +164,8 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
     free = {i for i in remesh if f.params.quality and f.surfaces[i].surface_type not in ANALYTIC}  # type: ignore[union-attr]
     for i in sorted(remesh, key=lambda i: i not in free):
         discretize_missing_edges(f.model.faces[i], f.topo, target * (ROOM if i in free else 1.0), f.params.angular)
+        if not f.params.all_own:
+            bare_ruled_seam(f.model.faces[i], f.surfaces[i], f.topo)  # type: ignore[arg-type]
     if f.params.quality:
         loops, planned = _plan_quality(f, remesh, target)
     redone = set(remesh)
@@ -189,12 +191,15 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
         if old is not None and old.uv is not None and not (i in f.plain and old.meshed_by in ("quality", "lattice")):
             seeds = old.uv[(old.node_edge < 0) & (old.node_vertex < 0)]  # not the points the quality mesh met again
         try:
+            face, made = f.model.faces[i], None
             if i in f.lattice and i not in f.plain:
-                face = f.model.faces[i]
-                lattice = mesh_lattice(i, face, boundary_loops(face, f.topo, target, f.params.angular),
-                                       f.surfaces[i], f.lattice[i], target, f.params.check_order)  # type: ignore[arg-type]
-                if lattice is not None:
-                    return lattice
+                made = mesh_lattice(i, face, boundary_loops(face, f.topo, target, f.params.angular), f.surfaces[i],  # type: ignore[arg-type]
+                                    f.lattice[i], target, f.params.check_order)
+            elif not f.params.all_own:  # the fewest triangles: a ruled face's strip or fan where it keeps the target
+                made = ruled_patch(i, face, boundary_loops(face, f.topo, target, f.params.angular), f.surfaces[i],  # type: ignore[arg-type]
+                                   target, f.params.check_order)
+            if made is not None:
+                return made
             return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
                              f.params.angular, f.params.check_order, seeds, f.min_area,
                              quality=f.params.quality and i not in f.plain)
@@ -239,7 +244,7 @@ def _uncross(f: FaceStates) -> set[int]:
         if not split or crossings >= before:
             break
         before = crossings
-        faces = set().union(*(_faces_of_edge(f.model, f.topo, e) for e in split))
+        faces = set().union(*(faces_of_edge(f.model.faces, f.topo, e) for e in split))
         for i in faces:
             f.fallback.setdefault(i, "boundary_crossing")
         _remesh(f, faces)
@@ -294,7 +299,7 @@ def _plan_quality(f: FaceStates, remesh: list[int], target: float) -> tuple[list
                             target, f.params.angular, f.params.max_triangles)
     inside = set(remesh)
     kept = {e for e, p in f.topo.edge_params.items() if e in before and p is not before[e]
-            and any(i not in inside and f.patches[i] is not None for i in _faces_of_edge(f.model, f.topo, e))}
+            and any(i not in inside and f.patches[i] is not None for i in faces_of_edge(f.model.faces, f.topo, e))}
     for e in kept:
         f.topo.edge_params[e] = before[e]
     for k, i in enumerate(remesh):
@@ -310,7 +315,7 @@ def _faces_all(f: FaceStates, edge_index: int, kinds: tuple[str, ...]) -> bool:
     """True when every face the edge bounds (in `remesh` or not) has a surface of one of `kinds`: LINES_STAY_LINES,
     those that keep lines straight in their (u,v); ("plane",), those no lattice's rows stand on."""
     return all(f.surfaces[i] is not None and f.surfaces[i].surface_type in kinds  # type: ignore[union-attr]
-               for i in _faces_of_edge(f.model, f.topo, edge_index))
+               for i in faces_of_edge(f.model.faces, f.topo, edge_index))
 
 
 def _estimate(f: FaceStates, remesh: list[int], loops: list[list[dict]], planned: list[Field | None],  # type: ignore[type-arg]
@@ -345,7 +350,7 @@ def _open_collapsed_loops(f: FaceStates, faces: set[int]) -> set[int]:
             new = np.linspace(params[0], params[-1], CLOSED_EDGE_SEGMENTS + 1)
             if edge_length(edge, new) > CLOSED_EDGE_SEGMENTS * MIN_SPACING * f.tol:
                 f.topo.edge_params[ei] = new
-                cut |= _faces_of_edge(f.model, f.topo, ei)
+                cut |= faces_of_edge(f.model.faces, f.topo, ei)
     return cut
 
 
@@ -410,7 +415,7 @@ def _split_edges(f: FaceStates, over: list[int]) -> set[int]:
             after = split_edge_to_tolerance(edge, before, less_gap(target, gap))
             if len(after) != len(before):
                 f.topo.edge_params[ei] = after
-                todo |= _faces_of_edge(f.model, f.topo, ei)
+                todo |= faces_of_edge(f.model.faces, f.topo, ei)
     return todo
 
 
@@ -483,15 +488,3 @@ def _within_on_a_finer_grid(patch: FacePatch | None, surface: Surface | None, er
         return False
     error[band] = np.maximum(error[band], fine)
     return True
-
-
-def _faces_of_edge(model: CadModel, topo: Topology, edge_index: int) -> set[int]:
-    """Ids of the faces bounded by a B-rep edge (cached edge → faces map on the topology)."""
-    cache = getattr(topo, "_edge_faces", None)
-    if cache is None:
-        cache = {}
-        for i, face in enumerate(model.faces):
-            for e in face_edges(face):
-                cache.setdefault(topo.edge_index(e), set()).add(i)
-        topo._edge_faces = cache  # type: ignore[attr-defined]
-    return cache.get(edge_index, set())

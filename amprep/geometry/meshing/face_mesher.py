@@ -13,10 +13,11 @@ from OCP.TopoDS import TopoDS, TopoDS_Edge, TopoDS_Face
 from amprep.errors import AmprepError, ErrorCode
 from amprep.geometry.cad.occt_arrays import curve_values
 from amprep.geometry.cad.pcurve_shifts import ordered_edges
-from amprep.geometry.cad.surfaces import Surface
-from amprep.geometry.cad.topology import Topology, explore, winds_inward
+from amprep.geometry.cad.surfaces import CONE, CYLINDER, Surface
+from amprep.geometry.cad.topology import Topology, explore, face_edges, winds_inward
 from amprep.geometry.core.progress import checkpoint, within_budget
 from amprep.geometry.measure.chordal import exact_over, triangle_chordal_error
+from amprep.geometry.meshing.lattice import rectangle_sides, zip_rows
 from amprep.geometry.meshing.local_refine import (
     flip_flat_triangles,
     flip_for_angles,
@@ -25,7 +26,7 @@ from amprep.geometry.meshing.local_refine import (
     unfold,
 )
 from amprep.geometry.meshing.occt_read import FacePatch
-from amprep.geometry.meshing.shared_edges import ANALYTIC, discretize_missing_edges, has_pole
+from amprep.geometry.meshing.shared_edges import ANALYTIC, discretize_missing_edges, has_pole, is_straight
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
     MIN_SPACING,
@@ -327,4 +328,83 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
         final_err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, affine=affine)
     return pts, tris, xyz, exact_over(final_err, tolerance, xyz, uv, tris, surface, order)
 
+# ---- ruled faces, the default mesher's: a face ruled along one parameter (a cone or a cylinder along its generators, a
+# B-spline of degree 1 that way: each such iso-line one straight segment) meshed from its boundary alone, a strip of
+# triangles between its two iso-line sides or, at an apex, a fan, one triangle per segment of the edge across from
+# it. A flat triangle between two straight lines of the surface leaves it by no more than its chords on the boundary
+# do, so where those keep the tolerance the strip or fan does too (each is measured, and refused when a triangle is
+# over): the fewest triangles the shared edge discretisation allows. BRepMesh's grid on a cone (its ConeRangeSplitter)
+# is far over the tolerance at the apex, and re-meshed from that grid it made ten times the fan.
 
+
+def ruled_direction(surface: Surface) -> int | None:
+    """The parameter along which S is a straight segment: 1 (v) for a cone or a cylinder (their v-lines are
+    generators), 0 or 1 for a B-spline of degree 1 in u or in v with one knot span there (one segment, not a polyline),
+    None otherwise."""
+    if surface.closed_form is not None:
+        return 1 if surface.closed_form[0] in (CONE, CYLINDER) else None
+    d = surface.data
+    if surface.surface_type != "bspline" or d is None:
+        return None
+    for k, (deg, knots) in enumerate(((d["udeg"], d["uknots"]), (d["vdeg"], d["vknots"]))):
+        if deg == 1 and len(np.unique(knots)) == 2:
+            return k
+    return None
+
+
+def bare_ruled_seam(face: TopoDS_Face, surface: Surface, topo: Topology) -> None:
+    """Drop the interior points of a ruled face's seam (a straight edge of this face alone, met on both of its sides:
+    a cone's or a cylinder's generator where its (u,v) closes), so its strip or fan stands on the seam's ends alone;
+    BRepMesh cuts a cone's seam for its grid. No other face has points on it."""
+    if ruled_direction(surface) is None:
+        return
+    for edge in face_edges(face):
+        ei = topo.edge_index(edge)
+        params = topo.edge_params.get(ei)
+        if (params is not None and len(params) > 2 and BRep_Tool.IsClosed_s(edge, face)
+                and not BRep_Tool.Degenerated_s(edge) and is_straight(edge, params)):
+            topo.edge_params[ei] = params[[0, -1]]
+
+
+def ruled_patch(face_id: int, face: TopoDS_Face, loops: list[dict], surface: Surface, tolerance: float,  # type: ignore[type-arg]
+                order: int = 6) -> FacePatch | None:
+    """A FacePatch of the face's strip or fan (the comment above), measured; None when the surface is not ruled, the face
+    is not one (u,v) rectangle whose two ruled sides are single segments, both of its other sides are poles, or a
+    triangle is over the tolerance."""
+    way = ruled_direction(surface)
+    if way is None or len(loops) != 1:
+        return None
+    loop = loops[0]
+    swap = way == 0  # the ruled parameter made the second: its iso-lines, the sides, at u0 and u1
+    uv_loop = loop["uv"][:, ::-1] if swap else loop["uv"]
+    sides = rectangle_sides({**loop, "uv": uv_loop})
+    if sides is None or len(sides.left) != 2 or len(sides.right) != 2 or min(sides.pole) >= 0:
+        return None
+    bottom, top = sides.bottom, sides.top
+    uv, vertex = [uv_loop], [loop["vertex"]]
+    if max(sides.pole) < 0:  # a strip from one iso-line edge to the other
+        tris = zip_rows(bottom, uv_loop[bottom, 0], top, uv_loop[top, 0], np.zeros(len(bottom), np.int64),
+                        np.zeros(len(top), np.int64))
+    else:  # a fan: one node at the apex per segment across from it, at that segment's middle u, keyed to its vertex
+        at_bottom = sides.pole[0] >= 0
+        ring = top if at_bottom else bottom
+        ru = uv_loop[ring, 0]
+        m = len(ring) - 1
+        apex = len(uv_loop) + np.arange(m)
+        uv.append(np.stack([(ru[:-1] + ru[1:]) / 2, np.full(m, sides.v0 if at_bottom else sides.v1)], axis=1))
+        vertex.append(np.full(m, max(sides.pole), np.int64))
+        tris = np.stack([apex, ring[1:], ring[:-1]] if at_bottom else [ring[:-1], ring[1:], apex], axis=1)
+    all_uv = np.concatenate(uv)
+    used = np.zeros(len(all_uv), bool)
+    used[tris] = True
+    tris = (np.cumsum(used) - 1)[tris]
+    k_new = len(all_uv) - len(uv_loop)
+    node_uv = all_uv[used][:, ::-1] if swap else all_uv[used]
+    xyz = surface.evaluate(node_uv)
+    err = triangle_chordal_error(xyz[tris], node_uv[tris], surface, order, stop=tolerance)
+    if not len(tris) or (err > tolerance).any():
+        return None
+    flip = winds_inward(face) != swap  # counter-clockwise in the (u,v) it was made in: swapped, clockwise in the face's
+    return FacePatch(face_id, xyz, node_uv, tris[:, [0, 2, 1]] if flip else tris, np.concatenate(vertex)[used],
+                     np.concatenate([loop["edge"], np.full(k_new, -1, np.int64)])[used],
+                     np.concatenate([loop["param"], np.full(k_new, np.nan)])[used], meshed_by="ruled", error=err)

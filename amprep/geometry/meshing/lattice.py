@@ -355,7 +355,7 @@ def _split_to_field(face: TopoDS_Face, edge, topo: Topology, field: Field, v: fl
 
 
 # ---- meshing
-def _zip(a: np.ndarray, au: np.ndarray, b: np.ndarray, bu: np.ndarray, pair: np.ndarray,
+def zip_rows(a: np.ndarray, au: np.ndarray, b: np.ndarray, bu: np.ndarray, pair: np.ndarray,
          pb: np.ndarray) -> np.ndarray:
     """(m, 3) triangles, counter-clockwise in (u,v), between consecutive rows: a, au (n,) the lower rows' node ids and
     u, concatenated, `pair` (n,) which pair each belongs to (sorted); b, bu, pb the upper rows'. Each pair's segments,
@@ -460,7 +460,7 @@ def _lattice_nodes(loop: dict, sides: Sides, rows: np.ndarray, surface: Surface,
         bb = np.concatenate([row_ids[p + 1] for p in lo])
         bu = np.concatenate([row_u[p + 1] for p in lo])
         pb = np.repeat(np.arange(len(lo)), [len(row_ids[p + 1]) for p in lo])
-        tris.append(_zip(a, au, bb, bu, pair, pb))
+        tris.append(zip_rows(a, au, bb, bu, pair, pb))
     extra_uv, extra_v = [uv], [vertex]
     count = len(uv)
     for end in (0, 1):  # fans at poles
