@@ -328,6 +328,7 @@ def _refine_globally(pts: np.ndarray, tris: np.ndarray, err: np.ndarray, segment
         final_err = triangle_chordal_error(xyz[tris], uv[tris], surface, order, affine=affine)
     return pts, tris, xyz, exact_over(final_err, tolerance, xyz, uv, tris, surface, order)
 
+
 # ---- ruled faces, the default mesher's: a face ruled along one parameter (a cone or a cylinder along its generators, a
 # B-spline of degree 1 that way: each such iso-line one straight segment) meshed from its boundary alone, a strip of
 # triangles between its two iso-line sides or, at an apex, a fan, one triangle per segment of the edge across from
@@ -404,7 +405,7 @@ def ruled_patch(face_id: int, face: TopoDS_Face, loops: list[dict], surface: Sur
     err = triangle_chordal_error(xyz[tris], node_uv[tris], surface, order, stop=tolerance)
     if not len(tris) or (err > tolerance).any():
         return None
-    flip = winds_inward(face) != swap  # counter-clockwise in the (u,v) it was made in: swapped, clockwise in the face's
+    flip = winds_inward(face) != swap  # made counter-clockwise in (u,v) swapped: clockwise in the face's own (u,v)
     return FacePatch(face_id, xyz, node_uv, tris[:, [0, 2, 1]] if flip else tris, np.concatenate(vertex)[used],
                      np.concatenate([loop["edge"], np.full(k_new, -1, np.int64)])[used],
                      np.concatenate([loop["param"], np.full(k_new, np.nan)])[used], meshed_by="ruled", error=err)
