@@ -28,8 +28,13 @@ def _closed_solid(mesh):
 
 
 def _sample_triangles(mesh, order=8):
+    return _sample_corners(mesh.corners, order)
+
+
+def _sample_corners(corners, order=8):
+    """(m·P, 3) points of an order-`order` barycentric grid on each triangle's corners (m, 3, 3)."""
     w = np.array([(i, j, order - i - j) for i in range(order + 1) for j in range(order + 1 - i)], float) / order
-    return np.einsum("pk,mkd->mpd", w, mesh.corners).reshape(-1, 3)
+    return np.einsum("pk,mkd->mpd", w, corners).reshape(-1, 3)
 
 
 @pytest.mark.parametrize("tol", [0.1, 0.01])

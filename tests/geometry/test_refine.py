@@ -275,7 +275,8 @@ def test_adaptive_splits_edges_to_a_pole_along_them(reference_solids, name, occt
     c = check_mesh(r.mesh)
     assert c.closed and c.degenerate_triangles == 0 and manifold3d_accepts(r.mesh)
     # error ∝ h², so 40× less error needs ~40× the triangles; a fold at the pole ran away to 60,000×. The start is
-    # BRepMesh's grid's size: the default mesher's cone is a fan (ruled.py), whose few long triangles need as many
+    # BRepMesh's grid's size: the default mesher's cone is a fan (face_mesher.ruled_patch), whose few long triangles
+    # need as many
     first = mesh_model(model, MeshParams(tolerance=0.2, occt_edges=occt_edges, enforce_tolerance=False)).mesh
     assert r.mesh.n_triangles < 3 * (0.2 / 0.005) * max(mesh.n_triangles, first.n_triangles)
     err = face_chordal_errors(r.mesh, surfaces, 6)

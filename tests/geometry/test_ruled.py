@@ -1,13 +1,15 @@
-"""The default mesher's ruled faces: a cone's apex a fan, a frustum a strip, from the boundary alone (ruled.py)."""
+"""The default mesher's ruled faces: a cone's apex a fan, a frustum a strip, from the boundary alone
+(face_mesher.ruled_patch)."""
 
 import numpy as np
 import pytest
 
 from amprep.geometry.cad.read import model_from_shape, read_cad
-from amprep.geometry.core.checks import check_mesh, manifold3d_accepts
+from amprep.geometry.core.checks import check_mesh
 from amprep.geometry.meshing.params import MeshParams
 from amprep.geometry.meshing.pipeline import mesh_model
 from tests.conftest import corpus
+from tests.geometry.test_mesher import _closed_solid, _sample_corners
 
 
 def _cone_distance(p: np.ndarray, r: float, h: float) -> np.ndarray:
@@ -15,18 +17,6 @@ def _cone_distance(p: np.ndarray, r: float, h: float) -> np.ndarray:
     face: from the line h·ρ + r·z = r·h in the (ρ, z) half-plane, not from our (u,v) sampling."""
     rho = np.linalg.norm(p[:, :2], axis=1)
     return np.abs(h * rho + r * p[:, 2] - r * h) / np.hypot(h, r)
-
-
-def _samples(corners: np.ndarray, order: int = 8) -> np.ndarray:
-    """(m·P, 3) points of an order-`order` barycentric grid on each triangle (m, 3, 3)."""
-    w = np.array([(i, j, order - i - j) for i in range(order + 1) for j in range(order + 1 - i)], float) / order
-    return np.einsum("pk,mkd->mpd", w, corners).reshape(-1, 3)
-
-
-def _closed(mesh) -> None:  # type: ignore[no-untyped-def]
-    c = check_mesh(mesh)
-    assert c.boundary_edges == c.nonmanifold_edges == c.misoriented_edges == c.degenerate_triangles == 0, c
-    assert c.volume > 0 and manifold3d_accepts(mesh)
 
 
 def _faces_of(mesh, kind: str) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -40,12 +30,12 @@ def test_a_cones_apex_is_one_fan_within_the_tolerance(reference_solids, tol):
     triangle per segment of its rim (the disc's rim points), within the tolerance by the exact distance."""
     model = model_from_shape(reference_solids["cone"])  # r 10, h 20
     mesh = mesh_model(model, MeshParams(tolerance=tol)).mesh
-    _closed(mesh)
+    _closed_solid(mesh)
     cone = _faces_of(mesh, "cone")
     assert [f.meshed_by for f in mesh.faces if f.surface_type == "cone"] == ["ruled"]
     rim = np.flatnonzero((np.abs(mesh.vertices[:, 2]) < 1e-9) & (np.abs(np.linalg.norm(mesh.vertices[:, :2], axis=1) - 10) < 1e-6))
     assert cone.sum() == len(rim)  # a closed rim of n points: n segments, n triangles
-    assert _cone_distance(_samples(mesh.corners[cone]), 10, 20).max() <= tol * 1.001
+    assert _cone_distance(_sample_corners(mesh.corners[cone]), 10, 20).max() <= tol * 1.001
     first = mesh_model(model, MeshParams(tolerance=tol, enforce_tolerance=False)).mesh
     assert cone.sum() < _faces_of(first, "cone").sum()
 
@@ -58,12 +48,12 @@ def test_a_nurbs_cone_is_a_fan_too():
 
     nurbs = BRepBuilderAPI_NurbsConvert(cq.Solid.makeCone(10, 0, 20).wrapped, True).Shape()
     mesh = mesh_model(model_from_shape(nurbs), MeshParams(tolerance=0.01)).mesh
-    _closed(mesh)
+    _closed_solid(mesh)
     high = np.zeros(len(mesh.faces), bool)  # the lateral face: the one up to the apex (the disc is a B-spline too)
     high[mesh.face_ids[mesh.corners[:, :, 2].max(axis=1) > 1e-6]] = True
     assert [f.meshed_by for f in mesh.faces if high[f.id]] == ["ruled"]
     lateral = high[mesh.face_ids]
-    assert _cone_distance(_samples(mesh.corners[lateral]), 10, 20).max() <= 0.01 * 1.001
+    assert _cone_distance(_sample_corners(mesh.corners[lateral]), 10, 20).max() <= 0.01 * 1.001
 
 
 def test_a_frustum_is_one_strip_and_a_sphere_is_not_ruled():
@@ -88,7 +78,7 @@ def test_a_frustum_is_one_strip_and_a_sphere_is_not_ruled():
     bottom, top = int((np.abs(z) < 1e-9).sum()), int((np.abs(z - 12) < 1e-9).sum())
     assert len(patch.tris) == (bottom - 1) + (top - 1)  # both circles' segments (each has its seam point twice)
     # the frustum's cone: apex at z = 12 · 10 / 6 = 20
-    assert _cone_distance(_samples(patch.nodes[patch.tris]), 10, 20).max() <= tol * 1.001
+    assert _cone_distance(_sample_corners(patch.nodes[patch.tris]), 10, 20).max() <= tol * 1.001
     sphere = model_from_shape(cq.Solid.makeSphere(12, angleDegrees1=-90, angleDegrees2=90).wrapped)
     assert ruled_direction(surface_of(sphere.faces[0])) is None
 

@@ -103,7 +103,7 @@ def test_our_own_stl_is_placed_where_it_was_made(tmp_path):
 
 def _cone_stl(tmp_path, tol: float):  # type: ignore[no-untyped-def]
     """A cone with its apex (and a disc) as a CAD file and a user's STL of it at `tol`, with the true face of each
-    triangle: BRepMesh's own, whose grid puts the apex in many triangles (ours is a fan, ruled.py)."""
+    triangle: BRepMesh's own, whose grid puts the apex in many triangles (ours is a fan, face_mesher.ruled_patch)."""
     import cadquery as cq
     from OCP.BRepTools import BRepTools
 

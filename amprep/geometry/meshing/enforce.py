@@ -200,7 +200,7 @@ def _remesh(f: FaceStates, todo: set[int]) -> None:
                                    target, f.params.check_order)
             if made is not None:
                 return made
-            return mesh_face(i, f.model.faces[i], f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
+            return mesh_face(i, face, f.topo, f.surfaces[i], target,  # type: ignore[arg-type]
                              f.params.angular, f.params.check_order, seeds, f.min_area,
                              quality=f.params.quality and i not in f.plain)
         except AmprepError as exc:

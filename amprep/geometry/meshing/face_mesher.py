@@ -26,7 +26,7 @@ from amprep.geometry.meshing.local_refine import (
     unfold,
 )
 from amprep.geometry.meshing.occt_read import FacePatch
-from amprep.geometry.meshing.shared_edges import ANALYTIC, discretize_missing_edges, has_pole, is_straight
+from amprep.geometry.meshing.shared_edges import ANALYTIC, bare_straight_edges, discretize_missing_edges, has_pole
 from amprep.geometry.meshing.uv_cdt import (
     MAX_ROUNDS,
     MIN_SPACING,
@@ -357,14 +357,9 @@ def bare_ruled_seam(face: TopoDS_Face, surface: Surface, topo: Topology) -> None
     """Drop the interior points of a ruled face's seam (a straight edge of this face alone, met on both of its sides:
     a cone's or a cylinder's generator where its (u,v) closes), so its strip or fan stands on the seam's ends alone;
     BRepMesh cuts a cone's seam for its grid. No other face has points on it."""
-    if ruled_direction(surface) is None:
-        return
-    for edge in face_edges(face):
-        ei = topo.edge_index(edge)
-        params = topo.edge_params.get(ei)
-        if (params is not None and len(params) > 2 and BRep_Tool.IsClosed_s(edge, face)
-                and not BRep_Tool.Degenerated_s(edge) and is_straight(edge, params)):
-            topo.edge_params[ei] = params[[0, -1]]
+    if ruled_direction(surface) is not None:
+        seams = {topo.edge_index(e) for e in face_edges(face) if BRep_Tool.IsClosed_s(e, face)}
+        bare_straight_edges([face], topo, seams.__contains__)
 
 
 def ruled_patch(face_id: int, face: TopoDS_Face, loops: list[dict], surface: Surface, tolerance: float,  # type: ignore[type-arg]

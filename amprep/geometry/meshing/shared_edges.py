@@ -178,7 +178,7 @@ def edge_points(edge, params: np.ndarray) -> np.ndarray:  # type: ignore[no-unty
     return curve_values(BRepAdaptor_Curve(edge), params).reshape(-1, 3)
 
 
-def is_straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
+def _straight(edge, params: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
     """True when the edge is a straight line in space (whatever its curve type: a STEP may store a line as a B-spline):
     its points at the ends, the middle and the quarters lie within 1e-6 × its chord of the chord."""
     t = np.interp([0, 0.25, 0.5, 0.75, 1], [0, 1], [params[0], params[-1]])
@@ -224,7 +224,7 @@ def bare_straight_edges(faces: list[TopoDS_Face], topo: Topology, allowed: Calla
             ei = topo.edge_index(edge)
             params = topo.edge_params.get(ei)
             if (ei not in bared and params is not None and len(params) > 2 and not BRep_Tool.Degenerated_s(edge)
-                    and allowed(ei) and is_straight(edge, params)):
+                    and allowed(ei) and _straight(edge, params)):
                 bared[ei] = params
                 topo.edge_params[ei] = params[[0, -1]]
     for wire in (w for face in faces for w in explore(face, TopAbs_WIRE, TopoDS.Wire_s)) if bared else ():
@@ -284,7 +284,7 @@ def grade_edges(faces: list[TopoDS_Face], surfaces: list[Surface], topo: Topolog
             ei = topo.edge_index(edge)
             if w <= SLIVER * floor:
                 frozen.add(ei)
-            if (kind not in ANALYTIC and ei in topo.edge_params and is_straight(edge, topo.edge_params[ei])
+            if (kind not in ANALYTIC and ei in topo.edge_params and _straight(edge, topo.edge_params[ei])
                     and (pole or _curved_in_uv(edge, face, topo.edge_params[ei]))):
                 straight.add(ei)
             limit = GRADE * w if w >= wide else min(GRADE * wide, NEEDLE * w)
@@ -371,7 +371,7 @@ def _strip(face: TopoDS_Face, surface: Surface, topo: Topology) -> tuple[int, in
     (a, c), short = sorted(pairs, key=lambda pair: -min(chords[ei].sum() for ei in pair))
     if (max(chords[ei].sum() for ei in short) >= max(chords[a].max(), chords[c].max())  # wider than a segment: not a strip
             or min(len(chords[a]), len(chords[c])) < 3
-            or not all(is_straight(e, topo.edge_params[ei]) for ei, e in sides.items())):
+            or not all(_straight(e, topo.edge_params[ei]) for ei, e in sides.items())):
         return None
     ahead = any({ends[a][0], ends[c][0]} == set(ends[ei]) for ei in short)  # c runs from a's start's side too
     fa, fc = (along / along[-1] for along in (np.concatenate([[0.0], np.cumsum(chords[ei])]) for ei in (a, c)))
